@@ -1,0 +1,209 @@
+"""Diagnostics along the rod, in the paper's variables.
+
+Where things live: curvature ``kappa``, geometric torsion ``omega``, material twist and the internal moment
+``M`` at vertices; the twist angle ``alpha`` and the internal force ``F`` on edges. ``profile`` gathers them
+at the interior vertices (edge values averaged onto vertices), with ``xi`` the rest arc length.
+
+* ``kappa = |kb| / D`` (|kb| = 2 tan(phi/2), D the rest Voronoi length), the curvature the energy uses.
+* ``alpha``: signed angle from the discrete Frenet normal n to m1, about t (right-handed). The discrete Frenet
+  binormal of an edge is the average of the curvature binormals of its two vertices; alpha is NaN where
+  that average is below ``min_curvature`` (the Frenet frame is undefined there; never a made-up 0).
+* ``omega``: geometric torsion, the rotation of the discrete Frenet frame about t from edge to edge (the
+  Frenet frame's own reference twist) divided by D. The material twist is then exactly
+  ``(alpha_f - alpha_e) / D + omega``, the discrete form of ``alpha' + omega``.
+* ``M``: the discrete constitutive law, ``A1 [(kappa1 - kappa1_bar) m2 - (kappa2 - kappa2_bar) m1] / D +
+  A2 (m - m_bar) / D t`` with frame vectors averaged over the two edges; components (M_n, M_b, M_t) in the
+  vertex Frenet frame. This is paper Eq. 28 in the continuum limit.
+* ``F``: the force transmitted across each edge by the part beyond it (paper's convention: at a free end F
+  equals the applied end force), ``F_j = sum over energy terms of dE/de_j`` -- exact for the discrete rod,
+  in equilibrium or not. Components (F_t, F_n, F_b) in the edge Frenet frame.
+"""
+import numpy as np
+from numba import njit
+
+from .energies.bend import _bend_local, material_curvature
+from .energies.stretch import _stretch_local, elongations
+from .energies.twist import _twist_local, material_twist
+from .geometry import curvature_binormals, frenet_directors, material_frames, signed_angle, tangents
+from .rod import Rod, RodState
+
+
+def _q(state):
+    return state.q if isinstance(state, RodState) else np.asarray(state)
+
+
+def curvature(rod: Rod, state: RodState):
+    """kappa at each vertex (1/length)."""
+    t = tangents(state.q, rod.edge_nodes)
+    kb = curvature_binormals(t, rod.vertex_edges)
+    return np.linalg.norm(kb, axis=1) / rod.voronoi
+
+
+def frenet_normals(rod, state, min_curvature=1e-8):
+    """Discrete Frenet normal per edge, NaN rows where undefined; also returns tangents."""
+    t = tangents(state.q, rod.edge_nodes)
+    kb = curvature_binormals(t, rod.vertex_edges)
+    # threshold on |kb| ~ kappa * l: scale the curvature threshold by the local edge length
+    n, defined = frenet_directors(t, kb, rod.vertex_edges, rod.n_edges, min_curvature * rod.l_bar.mean())
+    n = n.copy()
+    n[~defined] = np.nan
+    return n, t
+
+
+def alpha(rod, state, min_curvature=1e-8):
+    """Twist angle alpha of each edge (radians): from the Frenet normal to m1 about t; NaN where kappa ~ 0."""
+    n, t = frenet_normals(rod, state, min_curvature)
+    m1, _ = material_frames(state.q, t, state.d1)
+    out = np.full(rod.n_edges, np.nan)
+    for j in range(rod.n_edges):
+        if np.isfinite(n[j, 0]):
+            out[j] = signed_angle(n[j], m1[j], t[j])
+    return out
+
+
+def torsion(rod, state, min_curvature=1e-8):
+    """Geometric torsion omega at each vertex (1/length); NaN where the Frenet frame is undefined."""
+    from .geometry import reference_twist_angle
+
+    n, t = frenet_normals(rod, state, min_curvature)
+    out = np.full(rod.n_vertices, np.nan)
+    for v, (a, b) in enumerate(rod.vertex_edges):
+        if np.isfinite(n[a, 0]) and np.isfinite(n[b, 0]):
+            out[v] = reference_twist_angle(t[a], n[a], t[b], n[b]) / rod.voronoi[v]
+    return out
+
+
+def material_twist_density(rod, state):
+    """Material twist per length (alpha' + omega in the continuum) at each vertex (radians/length)."""
+    return np.array([material_twist(state.q, rod.vertex_edges, state.reference_twist, v)
+                     for v in range(rod.n_vertices)]) / rod.voronoi
+
+
+def total_twist(rod, state):
+    """Total material twist Tw of the rod (radians): the sum of the integrated twists."""
+    return float(sum(material_twist(state.q, rod.vertex_edges, state.reference_twist, v)
+                     for v in range(rod.n_vertices)))
+
+
+def _vertex_frames(rod, state):
+    t = tangents(state.q, rod.edge_nodes)
+    m1, m2 = material_frames(state.q, t, state.d1)
+    e, f = rod.vertex_edges[:, 0], rod.vertex_edges[:, 1]
+    tv = t[e] + t[f]
+    tv /= np.linalg.norm(tv, axis=1)[:, None]
+    kb = curvature_binormals(t, rod.vertex_edges)
+    return t, m1, m2, tv, kb
+
+
+def internal_moments(rod, state):
+    """Internal moment vectors at the vertices (force * length), shape (n_vertices, 3)."""
+    t, m1, m2, tv, kb = _vertex_frames(rod, state)
+    e, f = rod.vertex_edges[:, 0], rod.vertex_edges[:, 1]
+    k = np.array([material_curvature(state.q, state.d1, rod.vertex_nodes, rod.vertex_edges, v)
+                  for v in range(rod.n_vertices)]).reshape(-1, 2)
+    m = np.array([material_twist(state.q, rod.vertex_edges, state.reference_twist, v)
+                  for v in range(rod.n_vertices)])
+    a1 = m1[e] + m1[f]
+    a2 = m2[e] + m2[f]
+    for a in (a1, a2):
+        a -= np.einsum("ij,ij->i", a, tv)[:, None] * tv
+        a /= np.linalg.norm(a, axis=1)[:, None]
+    D = rod.voronoi[:, None]
+    return (rod.A1 * ((k[:, :1] - rod.kappa_bar[:, :1]) * a2 - (k[:, 1:] - rod.kappa_bar[:, 1:]) * a1) / D
+            + rod.A2 * (m - rod.twist_bar)[:, None] / D * tv)
+
+
+def vertex_frenet(rod, state, min_curvature=1e-8):
+    """(t, n, b) at each vertex: t the averaged tangent, b along kb (NaN where kappa ~ 0)."""
+    t, _, _, tv, kb = _vertex_frames(rod, state)
+    lk = np.linalg.norm(kb, axis=1)
+    b = kb / np.where(lk > 0, lk, 1.0)[:, None]
+    b[lk <= min_curvature * rod.voronoi] = np.nan
+    n = np.cross(b, tv)
+    return tv, n, b
+
+
+@njit(cache=True)
+def _edge_forces(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_stretch,
+                 kappa_bar, twist_bar, voronoi, A1, A2, has_stretch, has_bend, has_twist):
+    n = edge_nodes.shape[0]
+    F = np.zeros((n, 3))
+    g6 = np.empty(6)
+    H6 = np.empty((6, 6))
+    g8 = np.empty(8)
+    H8 = np.empty((8, 8))
+    if has_stretch:
+        for j in range(n):
+            _stretch_local(q, edge_nodes, j, l_bar[j], k_stretch[j], lam[j], 1, g6, H6)
+            for i in range(3):
+                F[j, i] += g6[3 + i]   # dE/de = dE/dx_b
+    for v in range(vertex_nodes.shape[0]):
+        a = vertex_edges[v, 0]
+        b = vertex_edges[v, 1]
+        if has_bend:
+            _bend_local(q, d1, vertex_nodes, vertex_edges, v, kappa_bar[v, 0], kappa_bar[v, 1], A1 / voronoi[v],
+                        1, g8, H8)
+            for i in range(3):
+                F[a, i] += g8[i]
+                F[b, i] += g8[3 + i]
+        if has_twist:
+            _twist_local(q, vertex_nodes, vertex_edges, reference_twist, v, twist_bar[v], A2 / voronoi[v], 1,
+                         g8, H8)
+            for i in range(3):
+                F[a, i] += g8[i]
+                F[b, i] += g8[3 + i]
+    return F
+
+
+def internal_forces(rod, state, k_stretch=None, energies=("stretch", "bend", "twist")):
+    """Internal force across each edge (force units), shape (n_edges, 3): F_j = sum of dE/de_j.
+
+    For an inextensible rod the tension is carried by the multipliers ``state.lam``; ``k_stretch`` is the
+    solver's axial penalty (default: the one the solve used is folded into lam, so only lam is counted).
+    """
+    if k_stretch is None:
+        k_stretch = np.zeros(rod.n_edges) if rod.inextensible else rod.EA / rod.l_bar
+    lam = state.lam if state.lam.size == rod.n_edges else np.zeros(rod.n_edges)
+    return _edge_forces(state.q, state.d1, state.reference_twist, lam, rod.edge_nodes, rod.vertex_nodes,
+                        rod.vertex_edges, rod.l_bar, np.asarray(k_stretch, float), rod.kappa_bar, rod.twist_bar,
+                        rod.voronoi, rod.A1, rod.A2, "stretch" in energies, "bend" in energies,
+                        "twist" in energies)
+
+
+def strain(rod, state):
+    """Axial strain of each edge, (|e| - l) / l."""
+    return elongations(state.q, rod.edge_nodes, rod.l_bar) / rod.l_bar
+
+
+def node_arclength(rod):
+    """Rest arc length of each node from node 0."""
+    return np.concatenate([[0.0], np.cumsum(rod.l_bar)])[: rod.n_nodes]
+
+
+def profile(rod, state, k_stretch=None, min_curvature=1e-8):
+    """The paper's variables at the vertices, as a dict of equal-length arrays.
+
+    Keys: xi (rest arc length), kappa, omega, alpha, twist (material twist per length), Mn, Mb, Mt (moment
+    components in the vertex Frenet frame), Ft, Fn, Fb (force components, averaged from the adjacent edges).
+    """
+    xi = node_arclength(rod)[rod.vertex_nodes[:, 1]]
+    tv, nv, bv = vertex_frenet(rod, state, min_curvature)
+    M = internal_moments(rod, state)
+    F = internal_forces(rod, state, k_stretch)
+    e, f = rod.vertex_edges[:, 0], rod.vertex_edges[:, 1]
+    Fv = 0.5 * (F[e] + F[f])
+    al = alpha(rod, state, min_curvature)
+    av = 0.5 * (al[e] + _unwrap_near(al[f], al[e]))
+    return {
+        "xi": xi,
+        "kappa": curvature(rod, state),
+        "omega": torsion(rod, state, min_curvature),
+        "alpha": av,
+        "twist": material_twist_density(rod, state),
+        "Mn": np.einsum("ij,ij->i", M, nv), "Mb": np.einsum("ij,ij->i", M, bv), "Mt": np.einsum("ij,ij->i", M, tv),
+        "Ft": np.einsum("ij,ij->i", Fv, tv), "Fn": np.einsum("ij,ij->i", Fv, nv), "Fb": np.einsum("ij,ij->i", Fv, bv),
+    }
+
+
+def _unwrap_near(a, ref):
+    return ref + (a - ref + np.pi) % (2 * np.pi) - np.pi

@@ -1,0 +1,104 @@
+"""Stretching: the (near-)inextensibility of the centreline.
+
+Per edge ``j`` with rest length ``l_j`` and elongation ``g_j = |e_j| - l_j``:
+
+    E_j = lam_j g_j + 1/2 k_j g_j^2
+
+* an extensible rod of axial stiffness EA has ``k_j = EA / l_j`` and ``lam_j = 0`` (``E = EA/2 l eps^2``);
+* the inextensible rod of the paper (the default) uses the same term as an augmented Lagrangian: ``lam_j`` is
+  the multiplier (the tension) updated by the solver, ``k_j`` a moderate penalty, so that ``g -> 0`` without
+  the ill-conditioning and round-off floor of a huge EA.
+
+The tension carried by edge j is ``lam_j + k_j g_j`` (units of force).
+"""
+import numpy as np
+from numba import njit
+
+from ..stencils import edge_dofs, scatter_band, scatter_gradient
+
+
+@njit(cache=True)
+def _stretch_local(q, edge_nodes, j, l_bar, k, lam, order, g6, H6):
+    a = 4 * edge_nodes[j, 0]
+    b = 4 * edge_nodes[j, 1]
+    e0 = q[b] - q[a]
+    e1 = q[b + 1] - q[a + 1]
+    e2 = q[b + 2] - q[a + 2]
+    le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    g = le - l_bar
+    energy = lam * g + 0.5 * k * g * g
+    if order == 0:
+        return energy
+    tension = lam + k * g
+    t = (e0 / le, e1 / le, e2 / le)
+    for i in range(3):
+        g6[i] = -tension * t[i]
+        g6[3 + i] = tension * t[i]
+    if order == 1:
+        return energy
+    c = tension / le
+    for i in range(3):
+        for jj in range(3):
+            h = (k - c) * t[i] * t[jj]
+            if i == jj:
+                h += c
+            H6[i, jj] = h
+            H6[3 + i, 3 + jj] = h
+            H6[i, 3 + jj] = -h
+            H6[3 + i, jj] = -h
+    return energy
+
+
+@njit(cache=True)
+def stretch_energy(q, edge_nodes, l_bar, k, lam):
+    """Total stretching energy (including the multiplier term)."""
+    g6 = np.empty(6)
+    H6 = np.empty((6, 6))
+    total = 0.0
+    for j in range(edge_nodes.shape[0]):
+        total += _stretch_local(q, edge_nodes, j, l_bar[j], k[j], lam[j], 0, g6, H6)
+    return total
+
+
+@njit(cache=True)
+def stretch_gradient(q, edge_nodes, l_bar, k, lam, grad):
+    """Add the stretching gradient to ``grad``; returns the energy."""
+    g6 = np.empty(6)
+    H6 = np.empty((6, 6))
+    dofs = np.empty(6, dtype=np.int64)
+    total = 0.0
+    for j in range(edge_nodes.shape[0]):
+        total += _stretch_local(q, edge_nodes, j, l_bar[j], k[j], lam[j], 1, g6, H6)
+        edge_dofs(edge_nodes, j, dofs)
+        scatter_gradient(grad, dofs, g6, 1.0)
+    return total
+
+
+@njit(cache=True)
+def stretch_hessian(q, edge_nodes, l_bar, k, lam, grad, ab, kl, ku, perm):
+    """Add gradient to ``grad`` and Hessian to the band matrix ``ab``; returns the energy."""
+    g6 = np.empty(6)
+    H6 = np.empty((6, 6))
+    dofs = np.empty(6, dtype=np.int64)
+    total = 0.0
+    for j in range(edge_nodes.shape[0]):
+        total += _stretch_local(q, edge_nodes, j, l_bar[j], k[j], lam[j], 2, g6, H6)
+        edge_dofs(edge_nodes, j, dofs)
+        scatter_gradient(grad, dofs, g6, 1.0)
+        scatter_band(ab, kl, ku, perm, dofs, H6, 1.0)
+    return total
+
+
+@njit(cache=True)
+def elongations(q, edge_nodes, l_bar):
+    """g_j = |e_j| - l_j for all edges."""
+    n = edge_nodes.shape[0]
+    out = np.empty(n)
+    for j in range(n):
+        a = 4 * edge_nodes[j, 0]
+        b = 4 * edge_nodes[j, 1]
+        e0 = q[b] - q[a]
+        e1 = q[b + 1] - q[a + 1]
+        e2 = q[b + 2] - q[a + 2]
+        out[j] = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2) - l_bar[j]
+    return out

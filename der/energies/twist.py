@@ -1,0 +1,120 @@
+"""Twisting with natural twist (twisting stiffness A2).
+
+Per vertex ``v`` joining edges ``e`` and ``f``:
+
+    m_v = theta_f - theta_e + reference_twist_v           integrated material twist (radians)
+    E_v = A2 / (2 D_v) (m_v - twist_bar_v)^2
+
+``D_v`` is the rest Voronoi length. With the rest material frame on the Frenet frame, ``twist_bar`` is the
+discrete Frenet twist (``omega0 D`` in the continuum) and ``m = (alpha' + omega) D``, so the continuum limit is
+the paper's twisting term ``A2/2 (alpha' + omega - omega0)^2`` (Eq. 17). The reference twist depends on the
+centreline through the parallel-transported reference frames: ``dm/de = kb / (2|e|)``, ``dm/df = kb / (2|f|)``.
+"""
+import numpy as np
+from numba import njit
+
+from ..stencils import (
+    add_cross_matrix, add_outer, add_sym_outer, expand_vertex_gradient, expand_vertex_hessian, node,
+    scatter_band, scatter_gradient, vadd, vcross, vdot, vertex_dofs, vnorm, vscale, vsub,
+)
+
+
+@njit(cache=True)
+def material_twist(q, vertex_edges, reference_twist, v):
+    """Integrated material twist m_v (radians) at vertex v."""
+    return q[4 * vertex_edges[v, 1] + 3] - q[4 * vertex_edges[v, 0] + 3] + reference_twist[v]
+
+
+@njit(cache=True)
+def _twist_local(q, vertex_nodes, vertex_edges, reference_twist, v, mbar, stiff, order, g8, H8):
+    m = material_twist(q, vertex_edges, reference_twist, v)
+    r = m - mbar
+    energy = 0.5 * stiff * r * r
+    if order == 0:
+        return energy
+    x0 = node(q, vertex_nodes[v, 0])
+    x1 = node(q, vertex_nodes[v, 1])
+    x2 = node(q, vertex_nodes[v, 2])
+    e = vsub(x1, x0)
+    f = vsub(x2, x1)
+    le = vnorm(e)
+    lf = vnorm(f)
+    te = vscale(1.0 / le, e)
+    tf = vscale(1.0 / lf, f)
+    chi = 1.0 + vdot(te, tf)
+    kb = vscale(2.0 / chi, vcross(te, tf))
+    dm = np.empty(8)
+    for i in range(3):
+        dm[i] = 0.5 * kb[i] / le
+        dm[3 + i] = 0.5 * kb[i] / lf
+    dm[6] = -1.0
+    dm[7] = 1.0
+    for i in range(8):
+        g8[i] = stiff * r * dm[i]
+    if order == 1:
+        return energy
+    for i in range(8):
+        for j in range(8):
+            H8[i, j] = stiff * dm[i] * dm[j]
+    s = stiff * r
+    tt = vscale(1.0 / chi, vadd(te, tf))
+    add_sym_outer(H8, 0, 0, -s / (4.0 * le * le), kb, vadd(te, tt))
+    add_sym_outer(H8, 3, 3, -s / (4.0 * lf * lf), kb, vadd(tf, tt))
+    Bef = np.zeros((3, 3))
+    add_cross_matrix(Bef, 0, 0, s / (le * lf * chi), te)
+    add_outer(Bef, 0, 0, -s / (2.0 * le * lf), kb, tt)
+    for i in range(3):
+        for j in range(3):
+            H8[i, 3 + j] += Bef[i, j]
+            H8[3 + j, i] += Bef[i, j]
+    return energy
+
+
+@njit(cache=True)
+def twist_energy(q, vertex_nodes, vertex_edges, reference_twist, twist_bar, voronoi, A2):
+    """Total twisting energy."""
+    g8 = np.empty(8)
+    H8 = np.empty((8, 8))
+    total = 0.0
+    for v in range(vertex_nodes.shape[0]):
+        total += _twist_local(q, vertex_nodes, vertex_edges, reference_twist, v, twist_bar[v],
+                              A2 / voronoi[v], 0, g8, H8)
+    return total
+
+
+@njit(cache=True)
+def twist_gradient(q, vertex_nodes, vertex_edges, reference_twist, twist_bar, voronoi, A2, grad):
+    """Add the twisting energy gradient to ``grad``; returns the energy."""
+    g8 = np.empty(8)
+    g11 = np.empty(11)
+    H8 = np.empty((8, 8))
+    dofs = np.empty(11, dtype=np.int64)
+    total = 0.0
+    for v in range(vertex_nodes.shape[0]):
+        total += _twist_local(q, vertex_nodes, vertex_edges, reference_twist, v, twist_bar[v],
+                              A2 / voronoi[v], 1, g8, H8)
+        expand_vertex_gradient(g8, g11)
+        vertex_dofs(vertex_nodes, vertex_edges, v, dofs)
+        scatter_gradient(grad, dofs, g11, 1.0)
+    return total
+
+
+@njit(cache=True)
+def twist_hessian(q, vertex_nodes, vertex_edges, reference_twist, twist_bar, voronoi, A2, grad, ab, kl, ku,
+                  perm):
+    """Add gradient to ``grad`` and Hessian to the band matrix ``ab``; returns the energy."""
+    g8 = np.empty(8)
+    g11 = np.empty(11)
+    H8 = np.empty((8, 8))
+    H11 = np.empty((11, 11))
+    dofs = np.empty(11, dtype=np.int64)
+    total = 0.0
+    for v in range(vertex_nodes.shape[0]):
+        total += _twist_local(q, vertex_nodes, vertex_edges, reference_twist, v, twist_bar[v],
+                              A2 / voronoi[v], 2, g8, H8)
+        expand_vertex_gradient(g8, g11)
+        expand_vertex_hessian(H8, H11)
+        vertex_dofs(vertex_nodes, vertex_edges, v, dofs)
+        scatter_gradient(grad, dofs, g11, 1.0)
+        scatter_band(ab, kl, ku, perm, dofs, H11, 1.0)
+    return total

@@ -1,0 +1,251 @@
+"""Geometry of a discrete rod: edges, tangents, curvature binormals, frames and reference twist.
+
+Everything here is a small numba kernel on flat float64 arrays. Conventions (see DESIGN.md):
+
+* the state vector ``q`` interleaves node positions and edge angles: node ``k`` owns ``q[4k:4k+3]``,
+  edge ``j`` (from node ``j`` to node ``j+1``, wrapping on a ring) owns ``q[4j+3]`` = theta_j;
+* each edge carries a reference frame ``(d1, d2 = t x d1)`` moved by parallel transport in time, and a
+  material frame ``m1 = cos(theta) d1 + sin(theta) d2``, ``m2 = -sin(theta) d1 + cos(theta) d2``;
+* a vertex joins an edge ``e`` (before) and an edge ``f`` (after); its reference twist is the signed angle,
+  about ``t_f``, from ``d1_e`` parallel-transported onto ``t_f`` to ``d1_f``. It is stored unwrapped
+  (continuous in time), which is what carries the holonomy and the linking number of a closed ring.
+
+All angles are in radians, right-handed.
+"""
+import numpy as np
+from numba import njit
+
+from .stencils import edge_dofs, scatter_band
+
+# ---------------------------------------------------------------------------------------------
+# small vector helpers (3-vectors as length-3 arrays)
+# ---------------------------------------------------------------------------------------------
+
+
+@njit(cache=True, inline="always")
+def dot3(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True, inline="always")
+def cross3(a, b):
+    out = np.empty(3)
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+    return out
+
+
+@njit(cache=True, inline="always")
+def norm3(a):
+    return np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+
+
+@njit(cache=True)
+def parallel_transport(u, t1, t2):
+    """Rotate ``u`` by the smallest rotation taking unit vector ``t1`` onto unit vector ``t2``.
+
+    Rodrigues' formula with axis ``b = t1 x t2``: ``u c + b x u + b (b.u) / (1 + c)``, ``c = t1.t2``.
+    Undefined for antiparallel tangents (c = -1); callers must never ask for that (an edge that
+    reverses in one step is a failed step).
+    """
+    b = cross3(t1, t2)
+    c = dot3(t1, t2)
+    bxu = cross3(b, u)
+    s = dot3(b, u) / (1.0 + c)
+    out = np.empty(3)
+    for k in range(3):
+        out[k] = u[k] * c + bxu[k] + b[k] * s
+    return out
+
+
+@njit(cache=True)
+def signed_angle(u, v, axis):
+    """Signed angle from ``u`` to ``v`` about unit ``axis`` (right-handed), in (-pi, pi]."""
+    w = cross3(u, v)
+    return np.arctan2(dot3(w, axis), dot3(u, v))
+
+
+@njit(cache=True)
+def wrap_to_pi(a):
+    """Map an angle to (-pi, pi]."""
+    return a - 2.0 * np.pi * np.floor((a + np.pi) / (2.0 * np.pi))
+
+
+# ---------------------------------------------------------------------------------------------
+# per-edge and per-vertex geometry
+# ---------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def edge_vector(q, edge_nodes, j):
+    a = 4 * edge_nodes[j, 0]
+    b = 4 * edge_nodes[j, 1]
+    e = np.empty(3)
+    for k in range(3):
+        e[k] = q[b + k] - q[a + k]
+    return e
+
+
+@njit(cache=True)
+def tangents(q, edge_nodes):
+    """Unit tangents of all edges, shape (n_edges, 3)."""
+    n = edge_nodes.shape[0]
+    t = np.empty((n, 3))
+    for j in range(n):
+        e = edge_vector(q, edge_nodes, j)
+        t[j] = e / norm3(e)
+    return t
+
+
+@njit(cache=True)
+def edge_lengths(q, edge_nodes):
+    n = edge_nodes.shape[0]
+    out = np.empty(n)
+    for j in range(n):
+        out[j] = norm3(edge_vector(q, edge_nodes, j))
+    return out
+
+
+@njit(cache=True)
+def curvature_binormal(te, tf):
+    """Discrete curvature binormal ``kb = 2 te x tf / (1 + te.tf)`` (|kb| = 2 tan(phi/2), phi the turning angle)."""
+    return 2.0 * cross3(te, tf) / (1.0 + dot3(te, tf))
+
+
+@njit(cache=True)
+def curvature_binormals(t, vertex_edges):
+    nv = vertex_edges.shape[0]
+    kb = np.empty((nv, 3))
+    for v in range(nv):
+        kb[v] = curvature_binormal(t[vertex_edges[v, 0]], t[vertex_edges[v, 1]])
+    return kb
+
+
+@njit(cache=True)
+def material_frames(q, t, d1):
+    """Material directors (m1, m2) of all edges from theta = q[4j+3] and reference director d1."""
+    n = d1.shape[0]
+    m1 = np.empty((n, 3))
+    m2 = np.empty((n, 3))
+    for j in range(n):
+        d2 = cross3(t[j], d1[j])
+        c = np.cos(q[4 * j + 3])
+        s = np.sin(q[4 * j + 3])
+        for k in range(3):
+            m1[j, k] = c * d1[j, k] + s * d2[k]
+            m2[j, k] = -s * d1[j, k] + c * d2[k]
+    return m1, m2
+
+
+@njit(cache=True)
+def reference_twist_angle(te, d1e, tf, d1f):
+    """Signed angle about tf from d1e (transported from te to tf) to d1f, in (-pi, pi]."""
+    return signed_angle(parallel_transport(d1e, te, tf), d1f, tf)
+
+
+@njit(cache=True)
+def transport_frames(q, edge_nodes, vertex_edges, t_old, d1_old, twist_old, t_new, d1_new, twist_new):
+    """Move the reference frames from the tangents ``t_old`` to the tangents of ``q`` (parallel transport in time).
+
+    Writes the new tangents, reference directors and reference twist (kept continuous with ``twist_old``:
+    the change is taken in (-pi, pi], so that 2 pi windings and ring holonomy are never lost).
+    Returns False if an edge reversed or vanished (a failed step), True otherwise.
+    """
+    n = edge_nodes.shape[0]
+    for j in range(n):
+        e = edge_vector(q, edge_nodes, j)
+        le = norm3(e)
+        if not (le > 0.0) or not np.isfinite(le):
+            return False
+        tj = e / le
+        if 1.0 + dot3(t_old[j], tj) < 1e-12:
+            return False
+        d = parallel_transport(d1_old[j], t_old[j], tj)
+        # re-orthonormalise against round-off drift
+        s = dot3(d, tj)
+        for k in range(3):
+            d[k] -= s * tj[k]
+        d /= norm3(d)
+        t_new[j] = tj
+        d1_new[j] = d
+    for v in range(vertex_edges.shape[0]):
+        a = vertex_edges[v, 0]
+        b = vertex_edges[v, 1]
+        ang = reference_twist_angle(t_new[a], d1_new[a], t_new[b], d1_new[b])
+        twist_new[v] = twist_old[v] + wrap_to_pi(ang - twist_old[v])
+    return True
+
+
+@njit(cache=True)
+def frenet_directors(t, kb, vertex_edges, n_edges, min_kb):
+    """Discrete Frenet normal per edge from the curvature binormals of its end vertices.
+
+    The binormal of edge j is the average of the curvature binormals at its two vertices (one at the
+    ends of an open rod), projected normal to t_j; the normal is ``n = b x t``. Returns
+    ``(n, defined)`` where ``defined[j]`` is False where that average is shorter than ``min_kb`` (the
+    Frenet frame is undefined there, e.g. a straight stretch).
+    """
+    acc = np.zeros((n_edges, 3))
+    count = np.zeros(n_edges)
+    for v in range(vertex_edges.shape[0]):
+        for side in range(2):
+            j = vertex_edges[v, side]
+            count[j] += 1.0
+            for k in range(3):
+                acc[j, k] += kb[v, k]
+    nrm = np.zeros((n_edges, 3))
+    defined = np.zeros(n_edges, dtype=np.bool_)
+    for j in range(n_edges):
+        b = acc[j]
+        s = dot3(b, t[j])
+        for k in range(3):
+            b[k] -= s * t[j, k]
+        # the edge sees one or two vertices; compare the averaged binormal with the threshold
+        lb = norm3(b) / max(count[j], 1.0)
+        if lb > min_kb:
+            b = b / norm3(b)
+            nrm[j] = cross3(b, t[j])
+            defined[j] = True
+    return nrm, defined
+
+
+@njit(cache=True)
+def add_transport_jacobian(q, edge_nodes, dE_dtheta, ab, kl, ku, perm):
+    """Add the frame-transport part of the force Jacobian (non-symmetric) to the band matrix ``ab``.
+
+    The reference frames move by parallel transport *in time*, so the angles theta are coordinates of a chart
+    that is re-based at every step. Differentiating the elastic force in that chart gives the symmetric Hessian
+    of the energy plus, for every edge whose twisting moment ``dE/dtheta_j`` is not zero, the skew term
+    ``dE/dtheta_j / (2 |e_j|^2) [t_j]_x`` on the edge vector (the holonomy of parallel transport). It vanishes
+    where the theta equations balance without external twisting moments, and is what makes a follower
+    twisting moment a circulatory load.
+    """
+    dofs = np.empty(6, dtype=np.int64)
+    B = np.zeros((6, 6))
+    for j in range(edge_nodes.shape[0]):
+        g = dE_dtheta[j]
+        if g == 0.0:
+            continue
+        a = 4 * edge_nodes[j, 0]
+        b = 4 * edge_nodes[j, 1]
+        e = np.empty(3)
+        for k in range(3):
+            e[k] = q[b + k] - q[a + k]
+        le = norm3(e)
+        c = 0.5 * g / (le * le * le)   # [t]_x / |e|^2 = [e]_x / |e|^3
+        blk = np.zeros((3, 3))
+        blk[0, 1] = -c * e[2]
+        blk[0, 2] = c * e[1]
+        blk[1, 0] = c * e[2]
+        blk[1, 2] = -c * e[0]
+        blk[2, 0] = -c * e[1]
+        blk[2, 1] = c * e[0]
+        for r in range(3):
+            for s in range(3):
+                B[r, s] = blk[r, s]
+                B[3 + r, 3 + s] = blk[r, s]
+                B[r, 3 + s] = -blk[r, s]
+                B[3 + r, s] = -blk[r, s]
+        edge_dofs(edge_nodes, j, dofs)
+        scatter_band(ab, kl, ku, perm, dofs, B, 1.0)

@@ -1,0 +1,118 @@
+"""Banded storage of the rod's stiffness matrix and its factorisation.
+
+The stiffness of an open rod is banded in the interleaved DOF order (half-bandwidth 10: a vertex stencil spans
+11 consecutive DOFs). A ring wraps around; reordering its nodes as 0, N-1, 1, N-2, 2, ... ("folding" the ring)
+makes it banded again with half-bandwidth 19. Matrices are kept in LAPACK general-band storage
+``ab[kl + ku + i - j, j] = A[i, j]`` (with ``kl`` spare rows for pivoting) and factorised with ``dgbsv``;
+nothing is ever dense.
+"""
+import numpy as np
+from numba import njit
+
+
+def band_layout(n_nodes, closed):
+    """(kl, ku, perm): half-bandwidths and the DOF -> banded-position permutation."""
+    n_dof = 4 * n_nodes
+    if not closed:
+        return 10, 10, np.arange(n_dof, dtype=np.int64)
+    pos = np.empty(n_nodes, dtype=np.int64)
+    k = np.arange(n_nodes)
+    first = k <= (n_nodes - 1) // 2
+    pos[first] = 2 * k[first]
+    pos[~first] = 2 * (n_nodes - 1 - k[~first]) + 1
+    perm = (4 * pos[:, None] + np.arange(4)[None, :]).ravel()
+    return 19, 19, perm.astype(np.int64)
+
+
+def new_band(n_dof, kl, ku):
+    return np.zeros((2 * kl + ku + 1, n_dof), order="F")
+
+
+@njit(cache=True)
+def constrain_band(ab, kl, ku, perm, fixed, diag):
+    """Replace rows and columns of fixed DOFs by identity (times ``diag``), keeping the band."""
+    n = ab.shape[1]
+    off = kl + ku
+    for d in range(fixed.shape[0]):
+        if not fixed[d]:
+            continue
+        p = perm[d]
+        for j in range(max(0, p - kl), min(n - 1, p + ku) + 1):   # row p
+            ab[off + p - j, j] = 0.0
+        for i in range(max(0, p - ku), min(n - 1, p + kl) + 1):   # column p
+            ab[off + i - p, p] = 0.0
+        ab[off, p] = diag
+
+
+@njit(cache=True)
+def add_diagonal(ab, kl, ku, perm, values, scale):
+    off = kl + ku
+    for d in range(values.shape[0]):
+        p = perm[d]
+        ab[off, p] += scale * values[d]
+
+
+@njit(cache=True)
+def band_matvec(ab, kl, ku, perm, x, out):
+    """out = A x for the band matrix in original DOF order."""
+    n = ab.shape[1]
+    off = kl + ku
+    xp = np.empty(n)
+    for d in range(n):
+        xp[perm[d]] = x[d]
+    yp = np.zeros(n)
+    for j in range(n):
+        for i in range(max(0, j - ku), min(n - 1, j + kl) + 1):
+            yp[i] += ab[off + i - j, j] * xp[j]
+    for d in range(n):
+        out[d] = yp[perm[d]]
+
+
+@njit(cache=True)
+def band_to_coo(ab, kl, ku, perm):
+    """(rows, cols, vals) of the non-zeros, in original DOF order."""
+    n = ab.shape[1]
+    off = kl + ku
+    inv = np.empty(n, dtype=np.int64)
+    for d in range(n):
+        inv[perm[d]] = d
+    cnt = 0
+    for j in range(n):
+        for i in range(max(0, j - ku), min(n - 1, j + kl) + 1):
+            if ab[off + i - j, j] != 0.0:
+                cnt += 1
+    rows = np.empty(cnt, dtype=np.int64)
+    cols = np.empty(cnt, dtype=np.int64)
+    vals = np.empty(cnt)
+    c = 0
+    for j in range(n):
+        for i in range(max(0, j - ku), min(n - 1, j + kl) + 1):
+            v = ab[off + i - j, j]
+            if v != 0.0:
+                rows[c] = inv[i]
+                cols[c] = inv[j]
+                vals[c] = v
+                c += 1
+    return rows, cols, vals
+
+
+def band_to_sparse(ab, kl, ku, perm):
+    """The band matrix as a scipy CSR matrix in original DOF order (for eigen-solvers and tests)."""
+    import scipy.sparse as sp
+
+    rows, cols, vals = band_to_coo(ab, kl, ku, perm)
+    n = ab.shape[1]
+    return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
+
+
+def band_solve(ab, kl, ku, perm, rhs, overwrite=True):
+    """Solve A x = rhs (A in band storage; ``ab`` is overwritten by its LU factors).
+
+    Returns ``(x, info)``; ``info > 0`` means an exactly singular pivot (x is then invalid).
+    """
+    from scipy.linalg.lapack import dgbsv
+
+    b = np.empty_like(rhs)
+    b[perm] = rhs
+    _, _, xp, info = dgbsv(kl, ku, ab, b, overwrite_ab=overwrite, overwrite_b=True)
+    return xp[perm], info

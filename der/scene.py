@@ -1,0 +1,206 @@
+"""A scene: a rod plus the energy terms, loads and constraints it names; nothing else is evaluated.
+
+``Scene`` is plain data. ``make_plan`` turns it into flat arrays (a numba-friendly named tuple) and
+``evaluate`` is the one kernel both solvers call: it runs exactly the terms the plan lists, and counts how
+often each one ran (``plan.counters``), so that "a scene pays only for what it needs" can be checked.
+"""
+from collections import namedtuple
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from . import constraints as _constraints
+from .energies.bend import bend_energy, bend_gradient, bend_hessian
+from .energies.stretch import stretch_energy, stretch_gradient, stretch_hessian
+from .energies.twist import twist_energy, twist_gradient, twist_hessian
+from .geometry import add_transport_jacobian
+from .loads import (
+    DistributedForce, EndTorque, PointForce, TwistingMoment, add_dead_torques, add_nodal_forces,
+    add_theta_moments,
+)
+from .rod import Rod
+
+ENERGY_TERMS = ("stretch", "bend", "twist")
+# slots of plan.counters
+COUNTER_NAMES = ("stretch", "bend", "twist", "transport_jacobian", "nodal_forces", "theta_moments", "dead_torques")
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """A rod with the energy terms, loads and constraints it uses.
+
+    Parameters
+    ----------
+    rod : der.Rod
+    energies : tuple of str
+        Any of "stretch", "bend", "twist" (default: all three).
+    loads : sequence
+        ``der.point_force``, ``der.distributed_force``, ``der.end_torque``, ``der.twisting_moment`` records.
+    constraints : sequence
+        ``der.clamp``, ``der.pin``, ``der.fix_theta`` records.
+    """
+
+    rod: Rod
+    energies: tuple = ENERGY_TERMS
+    loads: tuple = ()
+    constraints: tuple = ()
+
+    def __post_init__(self):
+        if not isinstance(self.rod, Rod):
+            raise ValueError(f"rod must be a der.Rod (see der.rod_from_shape); got {type(self.rod).__name__}")
+        object.__setattr__(self, "energies", tuple(self.energies))
+        object.__setattr__(self, "loads", tuple(self.loads))
+        object.__setattr__(self, "constraints", tuple(self.constraints))
+        for name in self.energies:
+            if name not in ENERGY_TERMS:
+                raise ValueError(f"unknown energy term {name!r}; allowed: {', '.join(ENERGY_TERMS)}")
+        if len(set(self.energies)) != len(self.energies):
+            raise ValueError(f"energy terms listed twice: {self.energies}")
+        for load in self.loads:
+            _check_load(self.rod, load)
+        _constraints.validate(self.rod, self.constraints)
+
+    @property
+    def fixed(self):
+        """Boolean mask of the state entries held by constraints."""
+        return _constraints.fixed_dofs(self.rod, self.constraints)
+
+
+def _vec3(value, what):
+    v = np.asarray(value, dtype=float)
+    if v.shape != (3,) or not np.isfinite(v).all():
+        raise ValueError(f"{what} must be a finite 3-vector; got {value!r}")
+    return v
+
+
+def _check_load(rod, load):
+    if isinstance(load, PointForce):
+        if not -rod.n_nodes <= load.node < rod.n_nodes:
+            raise ValueError(f"point force on node {load.node}: out of range for {rod.n_nodes} nodes")
+        _vec3(load.force, "point force")
+    elif isinstance(load, DistributedForce):
+        _vec3(load.density, "distributed force density")
+    elif isinstance(load, EndTorque):
+        _constraints.end_index(rod, load.end)
+        if load.follower:
+            if not np.isfinite(load.torque):
+                raise ValueError(f"follower end torque must be a finite number; got {load.torque!r}")
+        else:
+            _vec3(load.torque, "dead end torque")
+    elif isinstance(load, TwistingMoment):
+        if not np.isfinite(load.density):
+            raise ValueError(f"twisting moment density must be finite; got {load.density!r}")
+    else:
+        raise ValueError(f"unknown load {load!r}; use der.point_force, der.distributed_force, der.end_torque "
+                         "or der.twisting_moment")
+
+
+Plan = namedtuple("Plan", [
+    "has_stretch", "has_bend", "has_twist",
+    "edge_nodes", "vertex_nodes", "vertex_edges",
+    "l_bar", "voronoi", "kappa_bar", "twist_bar", "A1", "A2", "k_stretch",
+    "has_nodal", "nodal_forces", "has_theta", "theta_moments",
+    "has_dead_torques", "torque_edges", "torque_vectors",
+    "counters",
+])
+
+
+def make_plan(scene, k_stretch):
+    """Flatten a scene for the kernels. ``k_stretch`` (per edge) is the axial penalty the solver uses."""
+    rod = scene.rod
+    nodal = np.zeros((rod.n_nodes, 3))
+    theta = np.zeros(rod.n_edges)
+    has_nodal = has_theta = False
+    t_edges, t_vecs = [], []
+    node_len = np.zeros(rod.n_nodes)
+    np.add.at(node_len, rod.edge_nodes[:, 0], 0.5 * rod.l_bar)
+    np.add.at(node_len, rod.edge_nodes[:, 1], 0.5 * rod.l_bar)
+    for load in scene.loads:
+        if isinstance(load, PointForce):
+            nodal[load.node % rod.n_nodes] += load.force
+            has_nodal = True
+        elif isinstance(load, DistributedForce):
+            nodal += node_len[:, None] * np.asarray(load.density)[None, :]
+            has_nodal = True
+        elif isinstance(load, EndTorque):
+            _, _, j = _constraints.end_index(rod, load.end)
+            if load.follower:
+                theta[j] += load.torque
+                has_theta = True
+            else:
+                t_edges.append(j)
+                t_vecs.append(load.torque)
+        elif isinstance(load, TwistingMoment):
+            theta += load.density * rod.l_bar
+            has_theta = True
+    return Plan(
+        "stretch" in scene.energies, "bend" in scene.energies, "twist" in scene.energies,
+        rod.edge_nodes, rod.vertex_nodes, rod.vertex_edges,
+        rod.l_bar, rod.voronoi, rod.kappa_bar, rod.twist_bar, rod.A1, rod.A2,
+        np.ascontiguousarray(k_stretch, dtype=float),
+        has_nodal, nodal, has_theta, theta,
+        len(t_edges) > 0, np.array(t_edges, dtype=np.int64), np.array(t_vecs, dtype=float).reshape(-1, 3),
+        np.zeros(len(COUNTER_NAMES), dtype=np.int64),
+    )
+
+
+@njit(cache=True)
+def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, perm):
+    """Energy of the scene at ``q``; ``grad`` <- dE/dq, ``fext`` <- generalized external force.
+
+    With ``order >= 2`` also ``ab`` <- the force Jacobian ``K = d(grad - fext)/dq`` in band storage: the energy
+    Hessian, the frame-transport term and the load stiffness. ``grad``, ``fext`` and ``ab`` are overwritten.
+    """
+    grad[:] = 0.0
+    fext[:] = 0.0
+    if order >= 2:
+        ab[:, :] = 0.0
+    energy = 0.0
+    if plan.has_stretch:
+        plan.counters[0] += 1
+        if order >= 2:
+            energy += stretch_hessian(q, plan.edge_nodes, plan.l_bar, plan.k_stretch, lam, grad, ab, kl, ku, perm)
+        elif order == 1:
+            energy += stretch_gradient(q, plan.edge_nodes, plan.l_bar, plan.k_stretch, lam, grad)
+        else:
+            energy += stretch_energy(q, plan.edge_nodes, plan.l_bar, plan.k_stretch, lam)
+    if plan.has_bend:
+        plan.counters[1] += 1
+        if order >= 2:
+            energy += bend_hessian(q, d1, plan.vertex_nodes, plan.vertex_edges, plan.kappa_bar, plan.voronoi,
+                                   plan.A1, grad, ab, kl, ku, perm)
+        elif order == 1:
+            energy += bend_gradient(q, d1, plan.vertex_nodes, plan.vertex_edges, plan.kappa_bar, plan.voronoi,
+                                    plan.A1, grad)
+        else:
+            energy += bend_energy(q, d1, plan.vertex_nodes, plan.vertex_edges, plan.kappa_bar, plan.voronoi,
+                                  plan.A1)
+    if plan.has_twist:
+        plan.counters[2] += 1
+        if order >= 2:
+            energy += twist_hessian(q, plan.vertex_nodes, plan.vertex_edges, reference_twist, plan.twist_bar,
+                                    plan.voronoi, plan.A2, grad, ab, kl, ku, perm)
+        elif order == 1:
+            energy += twist_gradient(q, plan.vertex_nodes, plan.vertex_edges, reference_twist, plan.twist_bar,
+                                     plan.voronoi, plan.A2, grad)
+        else:
+            energy += twist_energy(q, plan.vertex_nodes, plan.vertex_edges, reference_twist, plan.twist_bar,
+                                   plan.voronoi, plan.A2)
+    if order >= 2 and (plan.has_bend or plan.has_twist):
+        plan.counters[3] += 1
+        n_edges = plan.edge_nodes.shape[0]
+        dE_dtheta = np.empty(n_edges)
+        for j in range(n_edges):
+            dE_dtheta[j] = grad[4 * j + 3]
+        add_transport_jacobian(q, plan.edge_nodes, dE_dtheta, ab, kl, ku, perm)
+    if plan.has_nodal:
+        plan.counters[4] += 1
+        add_nodal_forces(plan.nodal_forces, fext)
+    if plan.has_theta:
+        plan.counters[5] += 1
+        add_theta_moments(plan.theta_moments, fext)
+    if plan.has_dead_torques:
+        plan.counters[6] += 1
+        add_dead_torques(q, plan.edge_nodes, plan.torque_edges, plan.torque_vectors, order, fext, ab, kl, ku, perm)
+    return energy

@@ -1,0 +1,192 @@
+"""Allocation-free helpers shared by the energy kernels.
+
+3-vectors are numba tuples ``(x, y, z)`` so that the per-stencil algebra stays in registers; local
+Hessians are written into small preallocated buffers. A vertex stencil has 11 degrees of freedom,
+ordered as in the global state vector: ``[x0 (3), theta_e, x1 (3), theta_f, x2 (3)]``. The kernels
+differentiate with respect to 8 local variables ``[e (3), f (3), theta_e, theta_f]`` with
+``e = x1 - x0`` and ``f = x2 - x1``; ``expand_vertex`` maps those derivatives to the 11 DOFs.
+"""
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, inline="always")
+def vec(a, i):
+    return (a[i, 0], a[i, 1], a[i, 2])
+
+
+@njit(cache=True, inline="always")
+def vsub(a, b):
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+@njit(cache=True, inline="always")
+def vadd(a, b):
+    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
+
+
+@njit(cache=True, inline="always")
+def vscale(s, a):
+    return (s * a[0], s * a[1], s * a[2])
+
+
+@njit(cache=True, inline="always")
+def vdot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True, inline="always")
+def vcross(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+@njit(cache=True, inline="always")
+def vnorm(a):
+    return np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+
+
+@njit(cache=True, inline="always")
+def node(q, k):
+    return (q[4 * k], q[4 * k + 1], q[4 * k + 2])
+
+
+@njit(cache=True, inline="always")
+def material(d1, t, theta):
+    """(m1, m2) from reference director d1, tangent t and angle theta."""
+    d2 = vcross(t, d1)
+    c = np.cos(theta)
+    s = np.sin(theta)
+    m1 = (c * d1[0] + s * d2[0], c * d1[1] + s * d2[1], c * d1[2] + s * d2[2])
+    m2 = (-s * d1[0] + c * d2[0], -s * d1[1] + c * d2[1], -s * d1[2] + c * d2[2])
+    return m1, m2
+
+
+# --- writing 3x3 blocks into a local matrix ----------------------------------------------------
+
+
+@njit(cache=True, inline="always")
+def add_outer(H, r, c, s, a, b):
+    """H[r:r+3, c:c+3] += s * a b^T"""
+    for i in range(3):
+        for j in range(3):
+            H[r + i, c + j] += s * a[i] * b[j]
+
+
+@njit(cache=True, inline="always")
+def add_sym_outer(H, r, c, s, a, b):
+    """H[r:r+3, c:c+3] += s * (a b^T + b a^T)"""
+    for i in range(3):
+        for j in range(3):
+            H[r + i, c + j] += s * (a[i] * b[j] + b[i] * a[j])
+
+
+@njit(cache=True, inline="always")
+def add_identity(H, r, c, s):
+    for i in range(3):
+        H[r + i, c + i] += s
+
+
+@njit(cache=True, inline="always")
+def add_cross_matrix(H, r, c, s, a):
+    """H[r:r+3, c:c+3] += s * [a]_x, where [a]_x b = a x b."""
+    H[r + 0, c + 1] -= s * a[2]
+    H[r + 0, c + 2] += s * a[1]
+    H[r + 1, c + 0] += s * a[2]
+    H[r + 1, c + 2] -= s * a[0]
+    H[r + 2, c + 0] -= s * a[1]
+    H[r + 2, c + 1] += s * a[0]
+
+
+@njit(cache=True, inline="always")
+def add_column(H, r, c, s, a):
+    """H[r:r+3, c] += s * a and the symmetric entries H[c, r:r+3]."""
+    for i in range(3):
+        H[r + i, c] += s * a[i]
+        H[c, r + i] += s * a[i]
+
+
+# --- from (e, f, theta_e, theta_f) to the 11 stencil DOFs --------------------------------------
+
+# For each of the 11 DOFs: up to two (local-variable index, coefficient) pairs.
+_VERTEX_MAP_IDX = np.array(
+    [[0, -1], [1, -1], [2, -1], [6, -1],
+     [0, 3], [1, 4], [2, 5], [7, -1],
+     [3, -1], [4, -1], [5, -1]], dtype=np.int64)
+_VERTEX_MAP_COEF = np.array(
+    [[-1.0, 0.0], [-1.0, 0.0], [-1.0, 0.0], [1.0, 0.0],
+     [1.0, -1.0], [1.0, -1.0], [1.0, -1.0], [1.0, 0.0],
+     [1.0, 0.0], [1.0, 0.0], [1.0, 0.0]])
+
+
+@njit(cache=True)
+def expand_vertex_gradient(g8, g11):
+    for a in range(11):
+        s = 0.0
+        for u in range(2):
+            i = _VERTEX_MAP_IDX[a, u]
+            if i >= 0:
+                s += _VERTEX_MAP_COEF[a, u] * g8[i]
+        g11[a] = s
+
+
+@njit(cache=True)
+def expand_vertex_hessian(H8, H11):
+    for a in range(11):
+        for b in range(11):
+            s = 0.0
+            for u in range(2):
+                i = _VERTEX_MAP_IDX[a, u]
+                if i < 0:
+                    continue
+                ci = _VERTEX_MAP_COEF[a, u]
+                for w in range(2):
+                    j = _VERTEX_MAP_IDX[b, w]
+                    if j < 0:
+                        continue
+                    s += ci * _VERTEX_MAP_COEF[b, w] * H8[i, j]
+            H11[a, b] = s
+
+
+@njit(cache=True)
+def vertex_dofs(vertex_nodes, vertex_edges, v, out):
+    """Global DOF indices of the 11 stencil DOFs of vertex v."""
+    k0 = vertex_nodes[v, 0]
+    k1 = vertex_nodes[v, 1]
+    k2 = vertex_nodes[v, 2]
+    for i in range(3):
+        out[i] = 4 * k0 + i
+        out[4 + i] = 4 * k1 + i
+        out[8 + i] = 4 * k2 + i
+    out[3] = 4 * vertex_edges[v, 0] + 3
+    out[7] = 4 * vertex_edges[v, 1] + 3
+
+
+@njit(cache=True)
+def edge_dofs(edge_nodes, j, out):
+    """Global DOF indices of the 6 node DOFs of edge j: [x_a (3), x_b (3)]."""
+    a = edge_nodes[j, 0]
+    b = edge_nodes[j, 1]
+    for i in range(3):
+        out[i] = 4 * a + i
+        out[3 + i] = 4 * b + i
+
+
+@njit(cache=True)
+def scatter_gradient(g, dofs, local, scale):
+    for a in range(dofs.shape[0]):
+        g[dofs[a]] += scale * local[a]
+
+
+@njit(cache=True)
+def scatter_band(ab, kl, ku, perm, dofs, H, scale):
+    """Add ``scale * H`` at rows/columns ``dofs`` of a LAPACK general-band matrix.
+
+    ``ab[kl + ku + i - j, j] = A[i, j]`` with ``i, j`` the permuted (banded) positions ``perm[dof]``.
+    """
+    m = dofs.shape[0]
+    off = kl + ku
+    for a in range(m):
+        i = perm[dofs[a]]
+        for b in range(m):
+            j = perm[dofs[b]]
+            ab[off + i - j, j] += scale * H[a, b]

@@ -175,18 +175,13 @@ def strain(rod, state):
     return elongations(state.q, rod.edge_nodes, rod.l_bar) / rod.l_bar
 
 
-def node_arclength(rod):
-    """Rest arc length of each node from node 0."""
-    return np.concatenate([[0.0], np.cumsum(rod.l_bar)])[: rod.n_nodes]
-
-
 def profile(rod, state, k_stretch=None, min_curvature=1e-8):
     """The paper's variables at the vertices, as a dict of equal-length arrays.
 
     Keys: xi (rest arc length), kappa, omega, alpha, twist (material twist per length), Mn, Mb, Mt (moment
     components in the vertex Frenet frame), Ft, Fn, Fb (force components, averaged from the adjacent edges).
     """
-    xi = node_arclength(rod)[rod.vertex_nodes[:, 1]]
+    xi = rod.xi_nodes[rod.vertex_nodes[:, 1]]
     tv, nv, bv = vertex_frenet(rod, state, min_curvature)
     M = internal_moments(rod, state)
     F = internal_forces(rod, state, k_stretch)

@@ -179,21 +179,30 @@ def transport_frames(q, edge_nodes, vertex_edges, t_old, d1_old, twist_old, t_ne
 
 @njit(cache=True)
 def frenet_directors(t, kb, vertex_edges, n_edges, min_kb):
-    """Discrete Frenet normal per edge from the curvature binormals of its end vertices.
+    """Discrete Frenet normal per edge from the curvature binormals of the vertices around it.
 
-    The binormal of edge j is the average of the curvature binormals at its two vertices (one at the
-    ends of an open rod), projected normal to t_j; the normal is ``n = b x t``. Returns
-    ``(n, defined)`` where ``defined[j]`` is False where that average is shorter than ``min_kb`` (the
-    Frenet frame is undefined there, e.g. a straight stretch).
+    The binormal of an edge is the average of the curvature binormals at its two vertices, projected normal to
+    the edge; at the end edge of an open rod (one vertex) it is extrapolated linearly from the two nearest
+    vertices, ``1.5 kb_1 - 0.5 kb_2``, so that it is second-order accurate at the edge midpoint there too. The
+    normal is ``n = b x t``. Returns ``(n, defined)``; ``defined[j]`` is False where the binormal (per vertex)
+    is shorter than ``min_kb``: the Frenet frame is undefined there, e.g. on a straight stretch.
     """
+    nv = vertex_edges.shape[0]
     acc = np.zeros((n_edges, 3))
     count = np.zeros(n_edges)
-    for v in range(vertex_edges.shape[0]):
+    for v in range(nv):
         for side in range(2):
             j = vertex_edges[v, side]
             count[j] += 1.0
             for k in range(3):
                 acc[j, k] += kb[v, k]
+    # open rod: vertex 0 is the only one on edge 0, vertex nv-1 the only one on the last edge
+    if nv >= 2 and count[vertex_edges[0, 0]] == 1.0 and count[vertex_edges[nv - 1, 1]] == 1.0:
+        j0 = vertex_edges[0, 0]
+        j1 = vertex_edges[nv - 1, 1]
+        for k in range(3):
+            acc[j0, k] = 1.5 * kb[0, k] - 0.5 * kb[1, k]
+            acc[j1, k] = 1.5 * kb[nv - 1, k] - 0.5 * kb[nv - 2, k]
     nrm = np.zeros((n_edges, 3))
     defined = np.zeros(n_edges, dtype=np.bool_)
     for j in range(n_edges):
@@ -201,7 +210,6 @@ def frenet_directors(t, kb, vertex_edges, n_edges, min_kb):
         s = dot3(b, t[j])
         for k in range(3):
             b[k] -= s * t[j, k]
-        # the edge sees one or two vertices; compare the averaged binormal with the threshold
         lb = norm3(b) / max(count[j], 1.0)
         if lb > min_kb:
             b = b / norm3(b)

@@ -53,8 +53,8 @@ def add_diagonal(ab, kl, ku, perm, values, scale):
 
 
 @njit(cache=True)
-def band_matvec(ab, kl, ku, perm, x, out):
-    """out = A x for the band matrix in original DOF order."""
+def band_matvec(ab, kl, ku, perm, x, out, absolute=False):
+    """out = A x (or |A| |x| with ``absolute``) for the band matrix in original DOF order."""
     n = ab.shape[1]
     off = kl + ku
     xp = np.empty(n)
@@ -63,7 +63,10 @@ def band_matvec(ab, kl, ku, perm, x, out):
     yp = np.zeros(n)
     for j in range(n):
         for i in range(max(0, j - ku), min(n - 1, j + kl) + 1):
-            yp[i] += ab[off + i - j, j] * xp[j]
+            if absolute:
+                yp[i] += abs(ab[off + i - j, j] * xp[j])
+            else:
+                yp[i] += ab[off + i - j, j] * xp[j]
     for d in range(n):
         out[d] = yp[perm[d]]
 

@@ -26,6 +26,16 @@ class PointForce:
 
 
 @dataclass(frozen=True)
+class EndForce:
+    """A dead force ``force`` (3-vector) on the end cross-section ``end`` ("start" or "end").
+
+    It acts at the end edge's midpoint -- the rod's end, xi = 0 or L -- as half the force on each of its nodes.
+    """
+    end: str
+    force: tuple
+
+
+@dataclass(frozen=True)
 class DistributedForce:
     """A dead force per unit rest length ``density`` (3-vector), lumped to nodes by Voronoi length."""
     density: tuple
@@ -51,6 +61,10 @@ class TwistingMoment:
 
 def point_force(node, force):
     return PointForce(int(node), tuple(float(f) for f in force))
+
+
+def end_force(force, end="end"):
+    return EndForce(end, tuple(float(f) for f in force))
 
 
 def distributed_force(density):

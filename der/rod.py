@@ -82,7 +82,45 @@ class Rod:
 
     @property
     def length(self):
-        return float(self.l_bar.sum())
+        """Rest length L of the material rod (see ``xi_nodes``)."""
+        if self.closed:
+            return float(self.l_bar.sum())
+        return float(self.l_bar.sum() - 0.5 * (self.l_bar[0] + self.l_bar[-1]))
+
+    @property
+    def xi_nodes(self):
+        """Rest arc length xi of each node.
+
+        An open rod's end cross-sections are the material frames of its end edges, so its arc length runs from
+        the midpoint of the first edge (xi = 0) to the midpoint of the last (xi = L): the first and last nodes
+        lie half an edge outside [0, L]. This puts a clamp, an end torque and an end force exactly at the
+        rod's ends, and every vertex at the centre of its Voronoi cell, so that the discrete energy is a
+        midpoint rule for the integral of Eq. 17 over [0, L] (second order, ends included).
+        """
+        xi = np.concatenate([[0.0], np.cumsum(self.l_bar)])[: self.n_nodes]
+        return xi if self.closed else xi - 0.5 * self.l_bar[0]
+
+    @property
+    def xi_edges(self):
+        """Rest arc length of each edge midpoint."""
+        return np.cumsum(self.l_bar) - 0.5 * self.l_bar - (0.0 if self.closed else 0.5 * self.l_bar[0])
+
+    def node_weights(self):
+        """Length of [0, L] each node stands for (its Voronoi cell; zero for the two outer nodes of an open rod)."""
+        w = np.zeros(self.n_nodes)
+        np.add.at(w, self.edge_nodes[:, 0], 0.5 * self.l_bar)
+        np.add.at(w, self.edge_nodes[:, 1], 0.5 * self.l_bar)
+        if not self.closed:
+            w[0] = w[-1] = 0.0
+        return w
+
+    def edge_weights(self):
+        """Length of [0, L] each edge's material frame stands for (half the end edges of an open rod)."""
+        w = self.l_bar.copy()
+        if not self.closed:
+            w[0] *= 0.5
+            w[-1] *= 0.5
+        return w
 
     @property
     def inextensible(self):

@@ -16,7 +16,7 @@ from .energies.stretch import stretch_energy, stretch_gradient, stretch_hessian
 from .energies.twist import twist_energy, twist_gradient, twist_hessian
 from .geometry import add_transport_jacobian
 from .loads import (
-    DistributedForce, EndTorque, PointForce, TwistingMoment, add_dead_torques, add_nodal_forces,
+    DistributedForce, EndForce, EndTorque, PointForce, TwistingMoment, add_dead_torques, add_nodal_forces,
     add_theta_moments,
 )
 from .rod import Rod
@@ -36,7 +36,8 @@ class Scene:
     energies : tuple of str
         Any of "stretch", "bend", "twist" (default: all three).
     loads : sequence
-        ``der.point_force``, ``der.distributed_force``, ``der.end_torque``, ``der.twisting_moment`` records.
+        ``der.point_force``, ``der.end_force``, ``der.distributed_force``, ``der.end_torque``,
+        ``der.twisting_moment`` records.
     constraints : sequence
         ``der.clamp``, ``der.pin``, ``der.fix_theta`` records.
     """
@@ -79,6 +80,9 @@ def _check_load(rod, load):
         if not -rod.n_nodes <= load.node < rod.n_nodes:
             raise ValueError(f"point force on node {load.node}: out of range for {rod.n_nodes} nodes")
         _vec3(load.force, "point force")
+    elif isinstance(load, EndForce):
+        _constraints.end_index(rod, load.end)
+        _vec3(load.force, "end force")
     elif isinstance(load, DistributedForce):
         _vec3(load.density, "distributed force density")
     elif isinstance(load, EndTorque):
@@ -113,12 +117,15 @@ def make_plan(scene, k_stretch):
     theta = np.zeros(rod.n_edges)
     has_nodal = has_theta = False
     t_edges, t_vecs = [], []
-    node_len = np.zeros(rod.n_nodes)
-    np.add.at(node_len, rod.edge_nodes[:, 0], 0.5 * rod.l_bar)
-    np.add.at(node_len, rod.edge_nodes[:, 1], 0.5 * rod.l_bar)
+    node_len = rod.node_weights()
     for load in scene.loads:
         if isinstance(load, PointForce):
             nodal[load.node % rod.n_nodes] += load.force
+            has_nodal = True
+        elif isinstance(load, EndForce):
+            _, _, j = _constraints.end_index(rod, load.end)
+            for k in rod.edge_nodes[j]:
+                nodal[k] += 0.5 * np.asarray(load.force)
             has_nodal = True
         elif isinstance(load, DistributedForce):
             nodal += node_len[:, None] * np.asarray(load.density)[None, :]
@@ -132,7 +139,7 @@ def make_plan(scene, k_stretch):
                 t_edges.append(j)
                 t_vecs.append(load.torque)
         elif isinstance(load, TwistingMoment):
-            theta += load.density * rod.l_bar
+            theta += load.density * rod.edge_weights()
             has_theta = True
     return Plan(
         "stretch" in scene.energies, "bend" in scene.energies, "twist" in scene.energies,

@@ -1,0 +1,96 @@
+"""Solvers: damped dynamics to static equilibrium (implicit by default, explicit as the reference)."""
+import dataclasses
+import sys
+import time
+
+import numpy as np
+
+from .options import STATUSES, ConvergenceError, SolveResult, SolverOptions
+from .system import build_system, prepare_state
+
+SOLVERS = ("implicit", "explicit")
+
+
+class Progress:
+    """Progress lines on stderr for solves that run longer than ``after`` seconds (never on stdout)."""
+
+    def __init__(self, label, enabled=None, after=2.0, every=1.0):
+        self.label, self.enabled, self.after, self.every = label, enabled, after, every
+        self.t0 = time.perf_counter()
+        self.last = self.t0
+
+    def update(self, iteration, residual, extra=""):
+        if self.enabled is False:
+            return
+        now = time.perf_counter()
+        if (self.enabled or now - self.t0 > self.after) and now - self.last >= self.every:
+            self.last = now
+            print(f"[der] {self.label}: iteration {iteration}, residual {residual:.3e} {extra} "
+                  f"({now - self.t0:.1f} s)", file=sys.stderr, flush=True)
+
+
+def solve(scene, state=None, solver="implicit", options=None, record=None, raise_on_failure=True, **overrides):
+    """Relax a scene to static equilibrium by damped dynamics.
+
+    Parameters
+    ----------
+    scene : der.Scene
+    state : der.RodState, optional
+        Starting configuration (default: the rod's rest state). It is not modified.
+    solver : "implicit" (default: backward Euler + Newton with pseudo-transient continuation) or "explicit"
+        (FIRE damped dynamics with a stable time step).
+    options : SolverOptions, optional; ``**overrides`` replace single fields (e.g. ``tol=1e-10``).
+    record : path of a rerun recording (.rrd) to write, or a ``der.recording.Recorder``; None for none.
+    raise_on_failure : raise ConvergenceError (carrying the result and last state) if not converged.
+
+    Returns
+    -------
+    SolveResult, with the stability of the equilibrium (``min_eigenvalue``, ``stable``) when converged.
+    """
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {SOLVERS}; got {solver!r}")
+    if options is None:
+        options = SolverOptions(**overrides)
+    elif overrides:
+        options = dataclasses.replace(options, **overrides)
+    rod = scene.rod
+    if state is None:
+        state = rod.rest_state()
+    elif state.q.shape != (rod.n_dof,) or state.d1.shape != (rod.n_edges, 3):
+        raise ValueError(f"state does not belong to this rod: q has shape {state.q.shape}, expected ({rod.n_dof},)")
+    elif not (np.isfinite(state.q).all() and np.isfinite(state.d1).all() and np.isfinite(state.reference_twist).all()):
+        bad = int(np.flatnonzero(~np.isfinite(state.q))[0]) if not np.isfinite(state.q).all() else -1
+        raise ValueError(f"the starting state must be finite (entry {bad} of q is {state.q[bad] if bad >= 0 else '?'})")
+    system = build_system(scene, options)
+    work = prepare_state(system, state)
+    recorder = None
+    if record is not None:
+        from ..recording import Recorder
+
+        recorder = record if isinstance(record, Recorder) else Recorder(record, rod, scene=scene)
+        recorder.log_rest()
+    progress = Progress(solver, options.progress)
+    try:
+        if solver == "implicit":
+            from .implicit import solve_implicit
+
+            result = solve_implicit(system, work, options, progress, recorder)
+        else:
+            from .explicit import solve_explicit
+
+            result = solve_explicit(system, work, options, progress, recorder)
+        if result.converged and options.stability:
+            from .stability import stability
+
+            stability(system, result, options.n_eigenvalues)
+        if recorder is not None:
+            recorder.log_final(result)
+    finally:
+        if recorder is not None and recorder is not record:
+            recorder.close()
+    if not result.converged and raise_on_failure:
+        raise ConvergenceError(result)
+    return result
+
+
+__all__ = ["solve", "SolverOptions", "SolveResult", "ConvergenceError", "STATUSES", "SOLVERS"]

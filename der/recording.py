@@ -1,0 +1,143 @@
+"""Rerun recordings (.rrd) of a solve, written without a viewer. Imported only when a recording is asked for.
+
+Entities (timeline ``iteration``):
+
+* ``rest/centreline`` (static): the rest shape; ``rest/m1`` (static): its material directors;
+* ``rod/centreline``: the centreline, one 2-point strip per edge, coloured by alpha (default) or by material
+  twist (blue negative, white zero, red positive);
+* ``rod/m1``: the material director m1 on (up to ``max_arrows``) edges;
+* ``rod/start_frame``, ``rod/end_frame``: t, m1, m2 of the end edges (red, green, blue);
+* ``energy/<term>`` and ``residual`` (log10): time series.
+
+Replay with ``rerun file.rrd``. rerun stores float32: positions read back agree to ~1e-7 relative.
+"""
+import uuid
+
+import numpy as np
+
+from . import diagnostics as dg
+from .geometry import material_frames, tangents
+
+
+def _diverging(values, scale):
+    """Blue-white-red colours (uint8 RGB) for values in [-scale, scale]; grey where NaN."""
+    v = np.clip(np.nan_to_num(values, nan=0.0) / (scale if scale > 0 else 1.0), -1.0, 1.0)
+    out = np.empty((v.size, 3))
+    pos = v >= 0
+    out[pos] = np.stack([np.ones(pos.sum()), 1 - v[pos], 1 - v[pos]], axis=1)
+    out[~pos] = np.stack([1 + v[~pos], 1 + v[~pos], np.ones((~pos).sum())], axis=1)
+    out[np.isnan(values)] = 0.6
+    return (255 * out).astype(np.uint8)
+
+
+class Recorder:
+    """Writes a solve to ``path`` (.rrd). Use as ``der.solve(..., record=path)`` or pass an instance.
+
+    color_by : "alpha" or "twist"; max_arrows : how many m1 arrows per step at most.
+    """
+
+    def __init__(self, path, rod, scene=None, color_by="alpha", max_arrows=200, application_id="der"):
+        import rerun as rr
+
+        if color_by not in ("alpha", "twist"):
+            raise ValueError(f"color_by must be 'alpha' or 'twist'; got {color_by!r}")
+        self.rr = rr
+        self.rod = rod
+        self.color_by = color_by
+        self.path = str(path)
+        self.stride = max(1, int(np.ceil(rod.n_edges / max_arrows)))
+        self.arrow_length = 0.5 * max(rod.l_bar.mean(), 0.02 * rod.length)
+        self.rec = rr.RecordingStream(application_id, recording_id=str(uuid.uuid4()))
+        self.rec.save(self.path)
+        self.closed = False
+        self.offset = 0   # added to iteration numbers (several solves in one recording)
+
+    def _strips(self, x):
+        e = self.rod.edge_nodes
+        return np.stack([x[e[:, 0]], x[e[:, 1]]], axis=1)
+
+    def log_rest(self):
+        rod, rr = self.rod, self.rr
+        state = rod.rest_state()
+        x = state.positions
+        self.rec.log("rest/centreline", rr.LineStrips3D(self._strips(x), colors=[[150, 150, 150]]), static=True)
+        mid = 0.5 * (x[rod.edge_nodes[:, 0]] + x[rod.edge_nodes[:, 1]])
+        sel = slice(None, None, self.stride)
+        self.rec.log("rest/m1", rr.Arrows3D(origins=mid[sel], vectors=self.arrow_length * rod.rest_d1[sel],
+                                            colors=[[120, 200, 120]]), static=True)
+
+    def log_step(self, iteration, state, residual, energies):
+        rod, rr, rec = self.rod, self.rr, self.rec
+        rec.set_time("iteration", sequence=int(iteration) + self.offset)
+        self.last_logged = (int(iteration), state.q.copy())
+        x = state.positions
+        if self.color_by == "alpha":
+            values = dg.alpha(rod, state)
+            scale = np.pi / 2
+        else:
+            tw = dg.material_twist_density(rod, state) - rod.twist_bar / rod.voronoi
+            values = np.zeros(rod.n_edges)
+            np.add.at(values, rod.vertex_edges[:, 0], 0.5 * tw)
+            np.add.at(values, rod.vertex_edges[:, 1], 0.5 * tw)
+            scale = np.nanmax(np.abs(values)) if values.size else 1.0
+        rec.log("rod/centreline", rr.LineStrips3D(self._strips(x), colors=_diverging(values, scale)))
+        t = tangents(state.q, rod.edge_nodes)
+        m1, m2 = material_frames(state.q, t, state.d1)
+        mid = 0.5 * (x[rod.edge_nodes[:, 0]] + x[rod.edge_nodes[:, 1]])
+        sel = slice(None, None, self.stride)
+        rec.log("rod/m1", rr.Arrows3D(origins=mid[sel], vectors=self.arrow_length * m1[sel],
+                                      colors=[[40, 180, 40]]))
+        L = 2 * self.arrow_length
+        for name, j in (("rod/start_frame", 0), ("rod/end_frame", rod.n_edges - 1)):
+            rec.log(name, rr.Arrows3D(origins=np.repeat(mid[j:j + 1], 3, axis=0),
+                                      vectors=L * np.stack([t[j], m1[j], m2[j]]),
+                                      colors=[[230, 40, 40], [40, 200, 40], [40, 80, 230]]))
+        for term, value in energies.items():
+            rec.log(f"energy/{term}", rr.Scalars(float(value)))
+        if np.isfinite(residual) and residual > 0:
+            rec.log("residual", rr.Scalars(float(np.log10(residual))))
+
+    def log_final(self, result):
+        rr = self.rr
+        self.rec.log("status", rr.TextLog(f"{result.solver}: {result.status} after {result.iterations} iterations, "
+                                          f"residual {result.residual:.3e}; {result.message}"))
+        last = getattr(self, "last_logged", None)
+        if last is None or last[0] != result.iterations or not np.array_equal(last[1], result.state.q):
+            self.log_step(result.iterations, result.state, result.residual, result.energy)
+
+    def flush(self):
+        if not self.closed:
+            self.rec.flush()
+
+    def close(self):
+        if not self.closed:
+            self.rec.flush()
+            self.rec.disconnect()
+            self.closed = True
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def read_centrelines(path):
+    """(iterations, positions list) of ``rod/centreline`` in a recording (float32 from the file)."""
+    from rerun.chunk import RrdReader
+
+    out = []
+    for chunk in RrdReader(path).stream().to_chunks():
+        if chunk.entity_path != "/rod/centreline":
+            continue
+        rb = chunk.to_record_batch()
+        its = rb.column("iteration").to_pylist()
+        strips = rb.column("LineStrips3D:strips").to_pylist()
+        for it, s in zip(its, strips):
+            segs = np.asarray(s, dtype=float)   # (n_edges, 2, 3)
+            pts = np.concatenate([segs[:, 0, :], segs[-1:, 1, :]], axis=0)
+            if np.array_equal(pts[0], pts[-1]):   # a ring: the last edge closes on the first node
+                pts = pts[:-1]
+            out.append((it, pts))
+    out.sort(key=lambda p: p[0])
+    return [p[0] for p in out], [p[1] for p in out]

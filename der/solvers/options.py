@@ -1,0 +1,141 @@
+"""Solver options (every tolerance and limit in one place) and the result of a solve."""
+import math
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """All tolerances and limits of the solvers.
+
+    Convergence is declared when the residual -- the largest generalized force on a free DOF (node forces,
+    and moments on theta divided by the mean edge length so both are forces), relative to ``load_scale`` --
+    is below ``tol`` and, for an inextensible rod, the largest axial strain is below ``strain_tol``.
+    ``load_scale`` is the largest of: the applied loads, the reactions at the constraints and the internal
+    forces of the rod (all as node forces). It is reported with every result.
+
+    Attributes
+    ----------
+    tol : residual tolerance (dimensionless), default 1e-8.
+    strain_tol : inextensibility tolerance on |strain| (None: equal to ``tol``).
+    max_iterations : implicit solver: pseudo-time steps (each one Newton step with a line search).
+    max_steps : explicit solver: time steps.
+    time_budget : wall-clock seconds after which a solve stops with status "time_budget".
+    dt0, dt_max, dt_growth : implicit pseudo-time step (dimensionless: the damping matrix is the diagonal of
+        the stiffness), its cap, and the largest growth per step. dt -> infinity is Newton's method.
+    line_search_steps, armijo : backtracking halvings per pseudo-time step and the sufficient-decrease factor.
+    dt : explicit time step (physical time for the rod's line density rho_A); None picks ``safety`` times
+        the stable limit. A larger requested dt is refused with a ValueError.
+    safety : fraction of the stable explicit step used.
+    fire_* : FIRE parameters of the explicit solver (Bitzek et al. 2006).
+    check_every : explicit steps between residual checks, progress and recording.
+    inextensible_penalty : penalty c of the augmented Lagrangian, k_j = c A1 / l_j^3 (inextensible rods).
+    stability : compute the lowest eigenvalues of the constrained stiffness at the equilibrium.
+    n_eigenvalues : how many of the lowest eigenvalues to report.
+    progress : print progress to stderr (None: only for solves longer than 2 s).
+    record_every : log every k-th iteration (implicit) or check (explicit) to a recording.
+    """
+
+    tol: float = 1e-8
+    strain_tol: float | None = None
+    max_iterations: int = 500
+    max_steps: int = 5_000_000
+    time_budget: float = math.inf
+    dt0: float = 1.0
+    dt_max: float = 1e14
+    dt_growth: float = 10.0
+    line_search_steps: int = 10
+    armijo: float = 1e-4
+    dt: float | None = None
+    safety: float = 0.9
+    fire_n_min: int = 5
+    fire_f_inc: float = 1.1
+    fire_f_dec: float = 0.5
+    fire_alpha: float = 0.1
+    fire_f_alpha: float = 0.99
+    check_every: int = 200
+    inextensible_penalty: float = 10.0
+    stability: bool = True
+    n_eigenvalues: int = 6
+    progress: bool | None = None
+    record_every: int = 1
+
+    def __post_init__(self):
+        positive = ("tol", "max_iterations", "max_steps", "time_budget", "dt0", "dt_max", "dt_growth", "safety",
+                    "check_every", "inextensible_penalty", "n_eigenvalues", "record_every", "fire_f_inc")
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name in positive and not (isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0
+                                           and not math.isnan(v)):
+                raise ValueError(f"SolverOptions.{f.name} must be a number > 0; got {v!r}")
+        if self.strain_tol is not None and not self.strain_tol > 0:
+            raise ValueError(f"SolverOptions.strain_tol must be None or > 0; got {self.strain_tol!r}")
+        if self.dt is not None and not (isinstance(self.dt, (int, float)) and math.isfinite(self.dt) and self.dt > 0):
+            raise ValueError(f"SolverOptions.dt must be None or a finite number > 0; got {self.dt!r}")
+        if not 0 < self.safety <= 1:
+            raise ValueError(f"SolverOptions.safety must be in (0, 1]; got {self.safety!r}")
+        if not 0 < self.armijo < 0.5:
+            raise ValueError(f"SolverOptions.armijo must be in (0, 0.5); got {self.armijo!r}")
+
+    @property
+    def effective_strain_tol(self):
+        return self.tol if self.strain_tol is None else self.strain_tol
+
+
+STATUSES = {
+    "converged": "residual below tol",
+    "max_iterations": "iteration or step limit reached before tol",
+    "time_budget": "wall-clock budget used up before tol",
+    "stalled": "no step could reduce the residual (at the round-off floor, or a singular/indefinite system)",
+    "nonfinite": "a NaN or inf appeared; the last finite state is kept",
+    "interrupted": "stopped by KeyboardInterrupt; the last state is kept",
+}
+
+
+@dataclass
+class SolveResult:
+    """Outcome of a solve (like scipy.optimize.OptimizeResult).
+
+    state : the final RodState (the last finite one on failure).
+    converged, status, message : whether and why the solve stopped (``STATUSES``).
+    residual : final residual (dimensionless, relative to ``load_scale``); strain : largest |axial strain|.
+    residual_floor : round-off floor of the residual, when it was estimated (NaN otherwise).
+    iterations : pseudo-time steps (implicit) or time steps (explicit); wall_time : seconds (after compilation).
+    load_scale : the force scale of the residual.
+    min_eigenvalue, stable, eigenvalues : stability at the equilibrium (None if not computed); eigenvalues are
+        of the stiffness pencil (K, M), i.e. squared natural frequencies, with rigid-body and other symmetry
+        modes removed. ``stable`` is False if one has a negative real part (divergence); ``flutter`` is True if
+        complex eigenvalues appear among the lowest (circulatory loads: the undamped rod would flutter).
+    energy : energy by term at the final state.
+    history : residual after each iteration/check.
+    """
+
+    state: object
+    converged: bool
+    status: str
+    residual: float
+    iterations: int
+    wall_time: float
+    message: str
+    solver: str = ""
+    strain: float = 0.0
+    load_scale: float = float("nan")
+    min_eigenvalue: float | None = None
+    stable: bool | None = None
+    eigenvalues: np.ndarray | None = None
+    flutter: bool | None = None
+    stability_note: str = ""
+    energy: dict = field(default_factory=dict)
+    history: list = field(default_factory=list)
+    dt: float | None = None
+    residual_floor: float = float("nan")
+
+
+class ConvergenceError(RuntimeError):
+    """Raised when a solve does not converge; ``.result`` holds the SolveResult with the last state."""
+
+    def __init__(self, result):
+        self.result = result
+        super().__init__(f"{result.solver} solve did not converge: {result.status} after {result.iterations} "
+                         f"iterations, residual {result.residual:.3e} -- {result.message}")

@@ -1,0 +1,285 @@
+"""What both solvers share: the scene flattened into work arrays, residual and load scale, frame transport,
+the inextensibility multiplier update, and energy by term.
+
+Residual (dimensionless): the largest out-of-balance generalized force on a free DOF, per unit length,
+relative to the load scale per unit length:
+
+    residual = max_i |R_i| / (w_i S_i / L)
+
+with ``R = f_ext - dE/dq``, ``w_i`` the rest length a DOF stands for (a node's Voronoi length, an edge's
+length), ``S_i`` the force scale ``F_s`` for node DOFs and the moment scale ``M_s`` for theta DOFs, and L the
+rod length. ``F_s`` (``M_s``) is the largest applied force (moment) -- point loads, distributed loads times
+L -- or internal force (moment) anywhere along the rod, which includes the reactions at the constraints.
+Measured this way a tolerance means the same thing at every n: a residual ``r`` perturbs the solution like a
+spurious distributed load of relative size ``r``.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ..constraints import apply_targets, fixed_dofs
+from ..energies.bend import _bend_local
+from ..energies.stretch import _stretch_local, elongations
+from ..energies.twist import _twist_local
+from ..geometry import transport_frames
+from ..linalg import band_layout, band_matvec, new_band
+from ..loads import DistributedForce, EndForce, EndTorque, PointForce, TwistingMoment
+from ..scene import COUNTER_NAMES, evaluate, make_plan
+
+
+@dataclass(eq=False)
+class System:
+    scene: object
+    rod: object
+    plan: object
+    fixed: np.ndarray
+    free: np.ndarray
+    kl: int
+    ku: int
+    perm: np.ndarray
+    k_stretch: np.ndarray
+    weights: np.ndarray        # w_i / L: rest length share of each DOF, as a fraction of L
+    is_theta: np.ndarray
+    mass: np.ndarray           # lumped mass (nodes) and rotational inertia (theta) per DOF
+    applied_force: float
+    applied_moment: float
+    grad: np.ndarray
+    fext: np.ndarray
+    ab: np.ndarray
+
+    @property
+    def n_dof(self):
+        return self.rod.n_dof
+
+    @property
+    def counters(self):
+        return dict(zip(COUNTER_NAMES, self.plan.counters.tolist()))
+
+
+def axial_penalty(rod, options):
+    """Per-edge axial stiffness k_j: EA / l_j for an extensible rod, the augmented-Lagrangian penalty
+    ``c A1 / l_j^3`` for an inextensible one."""
+    if rod.inextensible:
+        return options.inextensible_penalty * rod.A1 / rod.l_bar ** 3
+    return rod.EA / rod.l_bar
+
+
+def rotational_inertia(rod):
+    """Rotational inertia per length: ``rod.rho_J`` or a default putting twist waves at the bending wave
+    speed on the edge scale, ``rho_A h^2 A2 / (4 A1)``."""
+    if rod.rho_J is not None:
+        return rod.rho_J
+    h = rod.l_bar.mean()
+    return rod.rho_A * h * h * rod.A2 / (4.0 * rod.A1)
+
+
+def build_system(scene, options):
+    rod = scene.rod
+    k = axial_penalty(rod, options)
+    plan = make_plan(scene, k)
+    fixed = fixed_dofs(rod, scene.constraints)
+    kl, ku, perm = band_layout(rod.n_nodes, rod.closed)
+    n = rod.n_dof
+    L = rod.length
+    # residual weights: the length each DOF stands for (the outer nodes of an open rod stand for half an edge)
+    node_len = np.zeros(rod.n_nodes)
+    np.add.at(node_len, rod.edge_nodes[:, 0], 0.5 * rod.l_bar)
+    np.add.at(node_len, rod.edge_nodes[:, 1], 0.5 * rod.l_bar)
+    weights = np.repeat(node_len, 4) / L
+    is_theta = np.zeros(n, dtype=bool)
+    is_theta[3::4] = True
+    weights[3::4] = 1.0
+    weights[4 * np.arange(rod.n_edges) + 3] = rod.l_bar / L
+    mass = np.repeat(rod.rho_A * node_len, 4)
+    mass[3::4] = 1.0
+    mass[4 * np.arange(rod.n_edges) + 3] = rotational_inertia(rod) * rod.l_bar
+    F_app = M_app = 0.0
+    for load in scene.loads:
+        if isinstance(load, (PointForce, EndForce)):
+            F_app = max(F_app, float(np.linalg.norm(load.force)))
+        elif isinstance(load, DistributedForce):
+            F_app = max(F_app, float(np.linalg.norm(load.density)) * L)
+        elif isinstance(load, EndTorque):
+            M_app = max(M_app, float(np.abs(load.torque) if load.follower else np.linalg.norm(load.torque)))
+        elif isinstance(load, TwistingMoment):
+            M_app = max(M_app, abs(load.density) * L)
+    return System(scene, rod, plan, fixed, ~fixed, kl, ku, perm, k, weights, is_theta, mass, F_app, M_app,
+                  np.zeros(n), np.zeros(n), new_band(n, kl, ku))
+
+
+def evaluate_system(system, state, order):
+    """Energy; fills system.grad, system.fext (and system.ab with order 2)."""
+    return evaluate(system.plan, state.q, state.d1, state.reference_twist, state.lam, order, system.grad,
+                    system.fext, system.ab, system.kl, system.ku, system.perm)
+
+
+@njit(cache=True)
+def _internal_maxima(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_stretch,
+                     kappa_bar, twist_bar, voronoi, A1, A2, has_stretch, has_bend, has_twist):
+    """Largest internal force (across an edge) and internal moment (at a vertex)."""
+    n = edge_nodes.shape[0]
+    F = np.zeros((n, 3))
+    g6 = np.empty(6)
+    H6 = np.empty((6, 6))
+    g8 = np.empty(8)
+    H8 = np.empty((8, 8))
+    if has_stretch:
+        for j in range(n):
+            _stretch_local(q, edge_nodes, j, l_bar[j], k_stretch[j], lam[j], 1, g6, H6)
+            for i in range(3):
+                F[j, i] += g6[3 + i]
+    m_max = 0.0
+    for v in range(vertex_nodes.shape[0]):
+        a = vertex_edges[v, 0]
+        b = vertex_edges[v, 1]
+        m2 = 0.0
+        if has_bend:
+            s = A1 / voronoi[v]
+            e = _bend_local(q, d1, vertex_nodes, vertex_edges, v, kappa_bar[v, 0], kappa_bar[v, 1], s, 1, g8, H8)
+            for i in range(3):
+                F[a, i] += g8[i]
+                F[b, i] += g8[3 + i]
+            m2 += 2.0 * e * s   # |bending moment|^2 = (A1/D)^2 |kappa - kappa_bar|^2 = 2 E_v A1/D
+        if has_twist:
+            s = A2 / voronoi[v]
+            e = _twist_local(q, vertex_nodes, vertex_edges, reference_twist, v, twist_bar[v], s, 1, g8, H8)
+            for i in range(3):
+                F[a, i] += g8[i]
+                F[b, i] += g8[3 + i]
+            m2 += 2.0 * e * s
+        m_max = max(m_max, np.sqrt(m2))
+    f_max = 0.0
+    for j in range(n):
+        f_max = max(f_max, np.sqrt(F[j, 0] ** 2 + F[j, 1] ** 2 + F[j, 2] ** 2))
+    return f_max, m_max
+
+
+def load_scales(system, state):
+    """(F_s, M_s): force and moment scales of the residual (see module docstring)."""
+    rod, plan = system.rod, system.plan
+    f_int, m_int = _internal_maxima(state.q, state.d1, state.reference_twist, state.lam, rod.edge_nodes,
+                                    rod.vertex_nodes, rod.vertex_edges, rod.l_bar, plan.k_stretch, rod.kappa_bar,
+                                    rod.twist_bar, rod.voronoi, rod.A1, rod.A2, plan.has_stretch, plan.has_bend,
+                                    plan.has_twist)
+    L = rod.length
+    F_s = max(system.applied_force, f_int)
+    M_s = max(system.applied_moment, m_int)
+    if F_s == 0.0 and M_s == 0.0:
+        return rod.A1 / L ** 2, rod.A1 / L
+    if F_s == 0.0:
+        F_s = M_s / L
+    if M_s == 0.0:
+        M_s = F_s * L
+    return F_s, M_s
+
+
+def residual_vector(system):
+    """R = f_ext - dE/dq on the free DOFs (zero on fixed ones), from the last evaluation."""
+    R = system.fext - system.grad
+    R[system.fixed] = 0.0
+    return R
+
+
+def residual_norm(system, R, scales):
+    F_s, M_s = scales
+    s = np.where(system.is_theta, M_s, F_s) * system.weights
+    return float(np.max(np.abs(R) / s)) if R.size else 0.0
+
+
+def residual_floor(system, state, scales):
+    """Round-off floor of the residual: eps |K| |q| (the force change from rounding every coordinate), in
+    residual units. Positions are rounded relative to their size, so the floor grows with the distance from
+    the origin, the stiffness and the fourth power of n (the bending stiffness of an edge scales as 1/h^3)."""
+    out = np.empty(system.n_dof)
+    band_matvec(system.ab, system.kl, system.ku, system.perm, state.q, out, True)
+    out[system.fixed] = 0.0
+    return np.finfo(float).eps * residual_norm(system, out, scales)
+
+
+FLOOR_FACTOR = 10.0
+
+
+def floor_verdict(system, state, scales, residual, tol, what):
+    """Status and message for a solve whose residual stopped falling: converged at the round-off floor if the
+    residual is within FLOOR_FACTOR of it, stalled otherwise. Needs ``system.ab`` evaluated at ``state``."""
+    floor = residual_floor(system, state, scales)
+    if residual <= FLOOR_FACTOR * floor:
+        return "converged", floor, (f"converged to the round-off floor: residual {residual:.2e} (tol {tol:.1e}) is "
+                                    f"within {FLOOR_FACTOR:g}x the floor {floor:.1e} of double precision; {what}")
+    return "stalled", floor, (f"residual stuck at {residual:.2e}, above the round-off floor {floor:.1e} and tol "
+                              f"{tol:.1e}; {what}")
+
+
+def max_strain(system, state):
+    rod = system.rod
+    return float(np.max(np.abs(elongations(state.q, rod.edge_nodes, rod.l_bar) / rod.l_bar)))
+
+
+def constraint_residual(system, state, scales):
+    """The elongation left in an inextensible rod as a residual: max_j k_j |g_j| / (F_s l_j / L)."""
+    rod = system.rod
+    g = elongations(state.q, rod.edge_nodes, rod.l_bar)
+    return float(np.max(system.k_stretch * np.abs(g) / (scales[0] * rod.l_bar / rod.length)))
+
+
+def multiplier_update(system, state):
+    """Augmented-Lagrangian step for an inextensible rod: lam <- lam + k g."""
+    rod = system.rod
+    g = elongations(state.q, rod.edge_nodes, rod.l_bar)
+    state.lam += system.k_stretch * g
+
+
+def transport(system, base, q_new, out):
+    """Put ``q_new`` into ``out`` with frames transported from ``base``; False if an edge reversed/vanished."""
+    rod = system.rod
+    if out is not base:
+        out.q[:] = q_new
+        out.lam[:] = base.lam
+    ok = transport_frames(out.q, rod.edge_nodes, rod.vertex_edges, base.tangents, base.d1, base.reference_twist,
+                          out.tangents, out.d1, out.reference_twist)
+    return bool(ok)
+
+
+def prepare_state(system, state):
+    """A working copy of ``state`` with constraint targets applied and frames consistent with positions."""
+    rod = system.rod
+    work = state.copy()
+    if work.lam.size != rod.n_edges:
+        work.lam = np.zeros(rod.n_edges)
+    if not rod.inextensible:
+        work.lam[:] = 0.0
+    if not rod.closed:
+        work.q[4 * rod.n_nodes - 1] = 0.0
+    base = work.copy()
+    directors = apply_targets(rod, work, system.scene.constraints)
+    if not transport(system, base, work.q, work):
+        raise ValueError("the prescribed constraint targets reverse an edge in one step; "
+                         "move the clamp in smaller increments (continuation)")
+    for j, m1 in directors:
+        t = work.tangents[j]
+        d1 = work.d1[j]
+        d2 = np.cross(t, d1)
+        target = np.arctan2(m1 @ d2, m1 @ d1)
+        current = work.q[4 * j + 3]
+        work.q[4 * j + 3] = current + (target - current + np.pi) % (2 * np.pi) - np.pi
+    return work
+
+
+def energy_terms(system, state):
+    """Energy of each term the scene uses, plus the work of the constant generalized loads."""
+    from ..energies.bend import bend_energy
+    from ..energies.stretch import stretch_energy
+    from ..energies.twist import twist_energy
+
+    rod, plan = system.rod, system.plan
+    out = {}
+    if plan.has_stretch:
+        out["stretch"] = float(stretch_energy(state.q, rod.edge_nodes, rod.l_bar, plan.k_stretch, state.lam))
+    if plan.has_bend:
+        out["bend"] = float(bend_energy(state.q, state.d1, rod.vertex_nodes, rod.vertex_edges, rod.kappa_bar,
+                                        rod.voronoi, rod.A1))
+    if plan.has_twist:
+        out["twist"] = float(twist_energy(state.q, rod.vertex_nodes, rod.vertex_edges, state.reference_twist,
+                                          rod.twist_bar, rod.voronoi, rod.A2))
+    return out

@@ -24,7 +24,9 @@ from numba import njit
 from .energies.bend import _bend_local, material_curvature
 from .energies.stretch import _stretch_local, elongations
 from .energies.twist import _twist_local, material_twist
-from .geometry import curvature_binormals, frenet_directors, material_frames, signed_angle, tangents
+from .geometry import (
+    curvature_binormals, edge_frames, frenet_directors, material_frames, signed_angle, tangents,
+)
 from .rod import Rod, RodState
 
 
@@ -99,8 +101,8 @@ def internal_moments(rod, state):
     """Internal moment vectors at the vertices (force * length), shape (n_vertices, 3)."""
     t, m1, m2, tv, kb = _vertex_frames(rod, state)
     e, f = rod.vertex_edges[:, 0], rod.vertex_edges[:, 1]
-    k = np.array([material_curvature(state.q, state.d1, rod.vertex_nodes, rod.vertex_edges, v)
-                  for v in range(rod.n_vertices)]).reshape(-1, 2)
+    ed = edge_frames(state.q, rod.edge_nodes, state.d1)
+    k = np.array([material_curvature(ed, rod.vertex_edges, v) for v in range(rod.n_vertices)]).reshape(-1, 2)
     m = np.array([material_twist(state.q, rod.vertex_edges, state.reference_twist, v)
                   for v in range(rod.n_vertices)])
     a1 = m1[e] + m1[f]
@@ -126,12 +128,16 @@ def vertex_frenet(rod, state, min_curvature=1e-8):
 @njit(cache=True)
 def _edge_forces(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_stretch,
                  kappa_bar, twist_bar, voronoi, A1, A2, has_stretch, has_bend, has_twist):
+    """F_j = sum of dE/de_j over the energy terms (n_edges, 3), and the internal moment magnitude per vertex."""
     n = edge_nodes.shape[0]
     F = np.zeros((n, 3))
+    M = np.zeros(vertex_nodes.shape[0])
     g6 = np.empty(6)
     H6 = np.empty((6, 6))
     g8 = np.empty(8)
     H8 = np.empty((8, 8))
+    work = np.empty((5, 8))
+    ed = edge_frames(q, edge_nodes, d1)
     if has_stretch:
         for j in range(n):
             _stretch_local(q, edge_nodes, j, l_bar[j], k_stretch[j], lam[j], 1, g6, H6)
@@ -140,19 +146,23 @@ def _edge_forces(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_e
     for v in range(vertex_nodes.shape[0]):
         a = vertex_edges[v, 0]
         b = vertex_edges[v, 1]
+        m2 = 0.0
         if has_bend:
-            _bend_local(q, d1, vertex_nodes, vertex_edges, v, kappa_bar[v, 0], kappa_bar[v, 1], A1 / voronoi[v],
-                        1, g8, H8)
+            s = A1 / voronoi[v]
+            e = _bend_local(ed, vertex_edges, v, kappa_bar[v, 0], kappa_bar[v, 1], s, 1, g8, H8, work)
             for i in range(3):
                 F[a, i] += g8[i]
                 F[b, i] += g8[3 + i]
+            m2 += 2.0 * e * s   # |bending moment|^2 = (A1/D)^2 |kappa - kappa_bar|^2 = 2 E_v A1/D
         if has_twist:
-            _twist_local(q, vertex_nodes, vertex_edges, reference_twist, v, twist_bar[v], A2 / voronoi[v], 1,
-                         g8, H8)
+            s = A2 / voronoi[v]
+            e = _twist_local(q, ed, vertex_edges, reference_twist, v, twist_bar[v], s, 1, g8, H8, work)
             for i in range(3):
                 F[a, i] += g8[i]
                 F[b, i] += g8[3 + i]
-    return F
+            m2 += 2.0 * e * s
+        M[v] = np.sqrt(m2)
+    return F, M
 
 
 def internal_forces(rod, state, k_stretch=None, energies=("stretch", "bend", "twist")):
@@ -167,7 +177,7 @@ def internal_forces(rod, state, k_stretch=None, energies=("stretch", "bend", "tw
     return _edge_forces(state.q, state.d1, state.reference_twist, lam, rod.edge_nodes, rod.vertex_nodes,
                         rod.vertex_edges, rod.l_bar, np.asarray(k_stretch, float), rod.kappa_bar, rod.twist_bar,
                         rod.voronoi, rod.A1, rod.A2, "stretch" in energies, "bend" in energies,
-                        "twist" in energies)
+                        "twist" in energies)[0]
 
 
 def strain(rod, state):

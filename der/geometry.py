@@ -139,6 +139,40 @@ def material_frames(q, t, d1):
 
 
 @njit(cache=True)
+def edge_frames(q, edge_nodes, d1):
+    """Per-edge data shared by the bending and twisting kernels, shape (n_edges, 10):
+    ``[t (3), |e|, m1 (3), m2 (3)]`` -- one pass, one sine and cosine per edge."""
+    n = edge_nodes.shape[0]
+    out = np.empty((n, 10))
+    for j in range(n):
+        a = 4 * edge_nodes[j, 0]
+        b = 4 * edge_nodes[j, 1]
+        e0 = q[b] - q[a]
+        e1 = q[b + 1] - q[a + 1]
+        e2 = q[b + 2] - q[a + 2]
+        le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        t0, t1, t2 = e0 / le, e1 / le, e2 / le
+        p0, p1, p2 = d1[j, 0], d1[j, 1], d1[j, 2]
+        # d2 = t x d1
+        r0 = t1 * p2 - t2 * p1
+        r1 = t2 * p0 - t0 * p2
+        r2 = t0 * p1 - t1 * p0
+        c = np.cos(q[4 * j + 3])
+        s = np.sin(q[4 * j + 3])
+        out[j, 0] = t0
+        out[j, 1] = t1
+        out[j, 2] = t2
+        out[j, 3] = le
+        out[j, 4] = c * p0 + s * r0
+        out[j, 5] = c * p1 + s * r1
+        out[j, 6] = c * p2 + s * r2
+        out[j, 7] = -s * p0 + c * r0
+        out[j, 8] = -s * p1 + c * r1
+        out[j, 9] = -s * p2 + c * r2
+    return out
+
+
+@njit(cache=True)
 def reference_twist_angle(te, d1e, tf, d1f):
     """Signed angle about tf from d1e (transported from te to tf) to d1f, in (-pi, pi]."""
     return signed_angle(parallel_transport(d1e, te, tf), d1f, tf)
@@ -237,23 +271,22 @@ def add_transport_jacobian(q, edge_nodes, dE_dtheta, ab, kl, ku, perm):
             continue
         a = 4 * edge_nodes[j, 0]
         b = 4 * edge_nodes[j, 1]
-        e = np.empty(3)
-        for k in range(3):
-            e[k] = q[b + k] - q[a + k]
-        le = norm3(e)
+        e0 = q[b] - q[a]
+        e1 = q[b + 1] - q[a + 1]
+        e2 = q[b + 2] - q[a + 2]
+        le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
         c = 0.5 * g / (le * le * le)   # [t]_x / |e|^2 = [e]_x / |e|^3
-        blk = np.zeros((3, 3))
-        blk[0, 1] = -c * e[2]
-        blk[0, 2] = c * e[1]
-        blk[1, 0] = c * e[2]
-        blk[1, 2] = -c * e[0]
-        blk[2, 0] = -c * e[1]
-        blk[2, 1] = c * e[0]
+        # the 3x3 block c [e]_x, repeated with signs (+, -, -, +) on (a, a), (a, b), (b, a), (b, b)
+        B[0, 1] = -c * e2
+        B[0, 2] = c * e1
+        B[1, 0] = c * e2
+        B[1, 2] = -c * e0
+        B[2, 0] = -c * e1
+        B[2, 1] = c * e0
         for r in range(3):
             for s in range(3):
-                B[r, s] = blk[r, s]
-                B[3 + r, 3 + s] = blk[r, s]
-                B[r, 3 + s] = -blk[r, s]
-                B[3 + r, s] = -blk[r, s]
+                B[3 + r, 3 + s] = B[r, s]
+                B[r, 3 + s] = -B[r, s]
+                B[3 + r, s] = -B[r, s]
         edge_dofs(edge_nodes, j, dofs)
         scatter_band(ab, kl, ku, perm, dofs, B, 1.0)

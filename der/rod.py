@@ -12,7 +12,7 @@ import numpy as np
 
 from .energies.bend import material_curvature
 from .geometry import (
-    curvature_binormals, frenet_directors, parallel_transport, reference_twist_angle, tangents,
+    curvature_binormals, edge_frames, frenet_directors, parallel_transport, reference_twist_angle, tangents,
 )
 
 
@@ -319,8 +319,8 @@ def rod_from_shape(shape, A1, A2, EA=None, rho_A=1.0, rho_J=None):
     q = np.zeros(4 * x.shape[0])
     q.reshape(-1, 4)[:, :3] = x
     rest_twist = np.array([reference_twist_angle(t[a], d1[a], t[b], d1[b]) for a, b in vertex_edges])
-    kappa_bar = np.array([material_curvature(q, d1, vertex_nodes, vertex_edges, v)
-                          for v in range(vertex_nodes.shape[0])]).reshape(-1, 2)
+    ed = edge_frames(q, edge_nodes, d1)
+    kappa_bar = np.array([material_curvature(ed, vertex_edges, v) for v in range(vertex_nodes.shape[0])]).reshape(-1, 2)
     voronoi = 0.5 * (le[vertex_edges[:, 0]] + le[vertex_edges[:, 1]])
     return Rod(closed=closed, A1=float(A1), A2=float(A2), EA=None if EA is None else float(EA),
                edge_nodes=edge_nodes, vertex_nodes=vertex_nodes, vertex_edges=vertex_edges,

@@ -14,7 +14,7 @@ from . import constraints as _constraints
 from .energies.bend import bend_energy, bend_gradient, bend_hessian
 from .energies.stretch import stretch_energy, stretch_gradient, stretch_hessian
 from .energies.twist import twist_energy, twist_gradient, twist_hessian
-from .geometry import add_transport_jacobian
+from .geometry import add_transport_jacobian, edge_frames
 from .loads import (
     DistributedForce, EndForce, EndTorque, PointForce, TwistingMoment, add_dead_torques, add_nodal_forces,
     add_theta_moments,
@@ -172,28 +172,30 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
             energy += stretch_gradient(q, plan.edge_nodes, plan.l_bar, plan.k_stretch, lam, grad)
         else:
             energy += stretch_energy(q, plan.edge_nodes, plan.l_bar, plan.k_stretch, lam)
+    if plan.has_bend or (plan.has_twist and order >= 1):
+        ed = edge_frames(q, plan.edge_nodes, d1)   # one pass over edges, shared by bending and twisting
+    else:
+        ed = np.empty((0, 10))
     if plan.has_bend:
         plan.counters[1] += 1
         if order >= 2:
-            energy += bend_hessian(q, d1, plan.vertex_nodes, plan.vertex_edges, plan.kappa_bar, plan.voronoi,
+            energy += bend_hessian(ed, plan.vertex_nodes, plan.vertex_edges, plan.kappa_bar, plan.voronoi,
                                    plan.A1, grad, ab, kl, ku, perm)
         elif order == 1:
-            energy += bend_gradient(q, d1, plan.vertex_nodes, plan.vertex_edges, plan.kappa_bar, plan.voronoi,
+            energy += bend_gradient(ed, plan.vertex_nodes, plan.vertex_edges, plan.kappa_bar, plan.voronoi,
                                     plan.A1, grad)
         else:
-            energy += bend_energy(q, d1, plan.vertex_nodes, plan.vertex_edges, plan.kappa_bar, plan.voronoi,
-                                  plan.A1)
+            energy += bend_energy(ed, plan.vertex_edges, plan.kappa_bar, plan.voronoi, plan.A1)
     if plan.has_twist:
         plan.counters[2] += 1
         if order >= 2:
-            energy += twist_hessian(q, plan.vertex_nodes, plan.vertex_edges, reference_twist, plan.twist_bar,
+            energy += twist_hessian(q, ed, plan.vertex_nodes, plan.vertex_edges, reference_twist, plan.twist_bar,
                                     plan.voronoi, plan.A2, grad, ab, kl, ku, perm)
         elif order == 1:
-            energy += twist_gradient(q, plan.vertex_nodes, plan.vertex_edges, reference_twist, plan.twist_bar,
+            energy += twist_gradient(q, ed, plan.vertex_nodes, plan.vertex_edges, reference_twist, plan.twist_bar,
                                      plan.voronoi, plan.A2, grad)
         else:
-            energy += twist_energy(q, plan.vertex_nodes, plan.vertex_edges, reference_twist, plan.twist_bar,
-                                   plan.voronoi, plan.A2)
+            energy += twist_energy(q, plan.vertex_edges, reference_twist, plan.twist_bar, plan.voronoi, plan.A2)
     if order >= 2 and (plan.has_bend or plan.has_twist):
         plan.counters[3] += 1
         n_edges = plan.edge_nodes.shape[0]

@@ -107,44 +107,41 @@ def add_column(H, r, c, s, a):
 
 # --- from (e, f, theta_e, theta_f) to the 11 stencil DOFs --------------------------------------
 
-# For each of the 11 DOFs: up to two (local-variable index, coefficient) pairs.
-_VERTEX_MAP_IDX = np.array(
-    [[0, -1], [1, -1], [2, -1], [6, -1],
-     [0, 3], [1, 4], [2, 5], [7, -1],
-     [3, -1], [4, -1], [5, -1]], dtype=np.int64)
-_VERTEX_MAP_COEF = np.array(
-    [[-1.0, 0.0], [-1.0, 0.0], [-1.0, 0.0], [1.0, 0.0],
-     [1.0, -1.0], [1.0, -1.0], [1.0, -1.0], [1.0, 0.0],
-     [1.0, 0.0], [1.0, 0.0], [1.0, 0.0]])
-
-
-@njit(cache=True)
-def expand_vertex_gradient(g8, g11):
-    for a in range(11):
-        s = 0.0
-        for u in range(2):
-            i = _VERTEX_MAP_IDX[a, u]
-            if i >= 0:
-                s += _VERTEX_MAP_COEF[a, u] * g8[i]
-        g11[a] = s
-
 
 @njit(cache=True)
 def expand_vertex_hessian(H8, H11):
-    for a in range(11):
-        for b in range(11):
-            s = 0.0
-            for u in range(2):
-                i = _VERTEX_MAP_IDX[a, u]
-                if i < 0:
-                    continue
-                ci = _VERTEX_MAP_COEF[a, u]
-                for w in range(2):
-                    j = _VERTEX_MAP_IDX[b, w]
-                    if j < 0:
-                        continue
-                    s += ci * _VERTEX_MAP_COEF[b, w] * H8[i, j]
-            H11[a, b] = s
+    """H11 = B^T H8 B: the Hessian in (e, f, theta_e, theta_f) mapped to the 11 stencil DOFs, block by block
+    (x0 -> -e, x1 -> e - f, x2 -> f)."""
+    for i in range(3):
+        for j in range(3):
+            ee = H8[i, j]
+            ef = H8[i, 3 + j]
+            fe = H8[3 + i, j]
+            ff = H8[3 + i, 3 + j]
+            H11[i, j] = ee                              # x0 x0
+            H11[i, 4 + j] = -ee + ef                    # x0 x1
+            H11[i, 8 + j] = -ef                         # x0 x2
+            H11[4 + i, j] = -ee + fe                    # x1 x0
+            H11[4 + i, 4 + j] = ee - ef - fe + ff       # x1 x1
+            H11[4 + i, 8 + j] = ef - ff                 # x1 x2
+            H11[8 + i, j] = -fe                         # x2 x0
+            H11[8 + i, 4 + j] = fe - ff                 # x2 x1
+            H11[8 + i, 8 + j] = ff                      # x2 x2
+        for c8, c11 in ((6, 3), (7, 7)):
+            e_t = H8[i, c8]
+            f_t = H8[3 + i, c8]
+            H11[i, c11] = -e_t
+            H11[4 + i, c11] = e_t - f_t
+            H11[8 + i, c11] = f_t
+            t_e = H8[c8, i]
+            t_f = H8[c8, 3 + i]
+            H11[c11, i] = -t_e
+            H11[c11, 4 + i] = t_e - t_f
+            H11[c11, 8 + i] = t_f
+    H11[3, 3] = H8[6, 6]
+    H11[3, 7] = H8[6, 7]
+    H11[7, 3] = H8[7, 6]
+    H11[7, 7] = H8[7, 7]
 
 
 @njit(cache=True)
@@ -169,6 +166,28 @@ def edge_dofs(edge_nodes, j, out):
     for i in range(3):
         out[i] = 4 * a + i
         out[3 + i] = 4 * b + i
+
+
+@njit(cache=True, inline="always")
+def edge_vectors(ed, j):
+    """(t, |e|, m1, m2) of edge j from an ``edge_frames`` array."""
+    return ((ed[j, 0], ed[j, 1], ed[j, 2]), ed[j, 3], (ed[j, 4], ed[j, 5], ed[j, 6]),
+            (ed[j, 7], ed[j, 8], ed[j, 9]))
+
+
+@njit(cache=True, inline="always")
+def scatter_vertex_gradient(grad, k0, k1, k2, ie, jf, g8):
+    """Add the local gradient in (e, f, theta_e, theta_f) to the nodes k0, k1, k2 and edges ie, jf
+    (e = x1 - x0, f = x2 - x1)."""
+    a = 4 * k0
+    b = 4 * k1
+    c = 4 * k2
+    for i in range(3):
+        grad[a + i] -= g8[i]
+        grad[b + i] += g8[i] - g8[3 + i]
+        grad[c + i] += g8[3 + i]
+    grad[4 * ie + 3] += g8[6]
+    grad[4 * jf + 3] += g8[7]
 
 
 @njit(cache=True)

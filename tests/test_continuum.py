@@ -5,7 +5,7 @@ from scipy.integrate import quad, solve_ivp
 import der
 from der.energies.bend import bend_energy
 from der.energies.twist import twist_energy
-from der.geometry import reference_twist_angle, tangents
+from der.geometry import edge_frames, reference_twist_angle, tangents
 
 A1, A2 = 1.3, 0.8
 KAPPA0, OMEGA0 = 1.0, 0.6
@@ -63,8 +63,9 @@ def discrete_energy(curve, n):
     m1 -= np.einsum("ij,ij->i", m1, t)[:, None] * t
     m1 /= np.linalg.norm(m1, axis=1)[:, None]
     ref = np.array([reference_twist_angle(t[e], m1[e], t[f], m1[f]) for e, f in rod.vertex_edges])
-    return (bend_energy(state.q, m1, rod.vertex_nodes, rod.vertex_edges, rod.kappa_bar, rod.voronoi, A1)
-            + twist_energy(state.q, rod.vertex_nodes, rod.vertex_edges, ref, rod.twist_bar, rod.voronoi, A2))
+    ed = edge_frames(state.q, rod.edge_nodes, m1)
+    return (bend_energy(ed, rod.vertex_edges, rod.kappa_bar, rod.voronoi, A1)
+            + twist_energy(state.q, rod.vertex_edges, ref, rod.twist_bar, rod.voronoi, A2))
 
 
 def fitted_order(ns, errors):
@@ -89,7 +90,8 @@ def test_uniform_rotation_of_a_curved_ring_costs_A1_kappa0_squared_one_minus_cos
         rod = der.rod_from_shape(der.shapes.ring(a0, n), A1, A2)
         state = rod.rest_state()
         state.theta[:] += alpha_rot
-        E = bend_energy(state.q, state.d1, rod.vertex_nodes, rod.vertex_edges, rod.kappa_bar, rod.voronoi, A1)
+        E = bend_energy(edge_frames(state.q, rod.edge_nodes, state.d1), rod.vertex_edges, rod.kappa_bar,
+                        rod.voronoi, A1)
         errors.append(abs(E / rod.length - exact) / exact)
     errors = np.array(errors)
     assert errors[-1] < 1e-3

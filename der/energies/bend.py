@@ -15,46 +15,28 @@ import numpy as np
 from numba import njit
 
 from ..stencils import (
-    add_column, add_cross_matrix, add_identity, add_outer, add_sym_outer, expand_vertex_gradient,
-    expand_vertex_hessian, material, node, scatter_band, scatter_gradient, vadd, vcross, vdot, vec,
-    vertex_dofs, vnorm, vscale, vsub,
+    add_column, add_cross_matrix, add_identity, add_outer, add_sym_outer, edge_vectors, expand_vertex_hessian,
+    scatter_band, scatter_vertex_gradient, vadd, vcross, vdot, vertex_dofs, vscale, vsub,
 )
 
 
 @njit(cache=True)
-def material_curvature(q, d1, vertex_nodes, vertex_edges, v):
-    """Integrated material curvatures (kappa1, kappa2) at vertex v."""
-    x0 = node(q, vertex_nodes[v, 0])
-    x1 = node(q, vertex_nodes[v, 1])
-    x2 = node(q, vertex_nodes[v, 2])
-    e = vsub(x1, x0)
-    f = vsub(x2, x1)
-    te = vscale(1.0 / vnorm(e), e)
-    tf = vscale(1.0 / vnorm(f), f)
-    ie = vertex_edges[v, 0]
-    jf = vertex_edges[v, 1]
-    m1e, m2e = material(vec(d1, ie), te, q[4 * ie + 3])
-    m1f, m2f = material(vec(d1, jf), tf, q[4 * jf + 3])
+def material_curvature(ed, vertex_edges, v):
+    """Integrated material curvatures (kappa1, kappa2) at vertex v; ``ed`` from ``geometry.edge_frames``."""
+    te, _, m1e, m2e = edge_vectors(ed, vertex_edges[v, 0])
+    tf, _, m1f, m2f = edge_vectors(ed, vertex_edges[v, 1])
     kb = vscale(2.0 / (1.0 + vdot(te, tf)), vcross(te, tf))
     return 0.5 * vdot(kb, vadd(m2e, m2f)), -0.5 * vdot(kb, vadd(m1e, m1f))
 
 
 @njit(cache=True)
-def _bend_local(q, d1, vertex_nodes, vertex_edges, v, kbar1, kbar2, stiff, order, g8, H8):
-    """Energy of vertex v; with order >= 1 its gradient in (e, f, theta_e, theta_f), order >= 2 the Hessian."""
-    x0 = node(q, vertex_nodes[v, 0])
-    x1 = node(q, vertex_nodes[v, 1])
-    x2 = node(q, vertex_nodes[v, 2])
-    e = vsub(x1, x0)
-    f = vsub(x2, x1)
-    le = vnorm(e)
-    lf = vnorm(f)
-    te = vscale(1.0 / le, e)
-    tf = vscale(1.0 / lf, f)
-    ie = vertex_edges[v, 0]
-    jf = vertex_edges[v, 1]
-    m1e, m2e = material(vec(d1, ie), te, q[4 * ie + 3])
-    m1f, m2f = material(vec(d1, jf), tf, q[4 * jf + 3])
+def _bend_local(ed, vertex_edges, v, kbar1, kbar2, stiff, order, g8, H8, work):
+    """Energy of vertex v; with order >= 1 its gradient in (e, f, theta_e, theta_f), order >= 2 the Hessian.
+
+    ``ed`` holds the per-edge tangents, lengths and material frames (``geometry.edge_frames``); ``work`` is a
+    (5, 8) scratch buffer, so nothing is allocated per vertex."""
+    te, le, m1e, m2e = edge_vectors(ed, vertex_edges[v, 0])
+    tf, lf, m1f, m2f = edge_vectors(ed, vertex_edges[v, 1])
     chi = 1.0 + vdot(te, tf)
     kb = vscale(2.0 / chi, vcross(te, tf))
     k1 = 0.5 * vdot(kb, vadd(m2e, m2f))
@@ -81,8 +63,8 @@ def _bend_local(q, d1, vertex_nodes, vertex_edges, v, kbar1, kbar2, stiff, order
     kb_m1f = vdot(kb, m1f)
     kb_m2e = vdot(kb, m2e)
     kb_m2f = vdot(kb, m2f)
-    dk1 = np.empty(8)
-    dk2 = np.empty(8)
+    dk1 = work[0]
+    dk2 = work[1]
     for i in range(3):
         dk1[i] = dk1e[i]
         dk1[3 + i] = dk1f[i]
@@ -132,7 +114,8 @@ def _bend_local(q, d1, vertex_nodes, vertex_edges, v, kbar1, kbar2, stiff, order
     add_outer(H8, 3, 3, s2 * k2 / (chi * lf2), tf, tf)
     add_sym_outer(H8, 3, 3, -s2 / (4.0 * lf2), kb, m1f)
     # ef block (and its transpose as fe)
-    Bef = np.zeros((3, 3))
+    Bef = work[2:5, 0:3]
+    Bef[:, :] = 0.0
     add_identity(Bef, 0, 0, -(s1 * k1 + s2 * k2) / (chi * lelf))
     add_outer(Bef, 0, 0, -(s1 * k1 + s2 * k2) / (chi * lelf), te, tf)
     add_outer(Bef, 0, 0, 2.0 * (s1 * k1 + s2 * k2) / lelf, tt, tt)
@@ -163,49 +146,48 @@ def _bend_local(q, d1, vertex_nodes, vertex_edges, v, kbar1, kbar2, stiff, order
 
 
 @njit(cache=True)
-def bend_energy(q, d1, vertex_nodes, vertex_edges, kappa_bar, voronoi, A1):
-    """Total bending energy."""
+def bend_energy(ed, vertex_edges, kappa_bar, voronoi, A1):
+    """Total bending energy; ``ed = geometry.edge_frames(q, edge_nodes, d1)``."""
     g8 = np.empty(8)
     H8 = np.empty((8, 8))
+    work = np.empty((5, 8))
     total = 0.0
-    for v in range(vertex_nodes.shape[0]):
-        total += _bend_local(q, d1, vertex_nodes, vertex_edges, v, kappa_bar[v, 0], kappa_bar[v, 1],
-                             A1 / voronoi[v], 0, g8, H8)
+    for v in range(vertex_edges.shape[0]):
+        total += _bend_local(ed, vertex_edges, v, kappa_bar[v, 0], kappa_bar[v, 1], A1 / voronoi[v], 0, g8, H8,
+                             work)
     return total
 
 
 @njit(cache=True)
-def bend_gradient(q, d1, vertex_nodes, vertex_edges, kappa_bar, voronoi, A1, grad):
+def bend_gradient(ed, vertex_nodes, vertex_edges, kappa_bar, voronoi, A1, grad):
     """Add the bending energy gradient to ``grad`` (length n_dof); returns the energy."""
     g8 = np.empty(8)
-    g11 = np.empty(11)
     H8 = np.empty((8, 8))
-    dofs = np.empty(11, dtype=np.int64)
+    work = np.empty((5, 8))
     total = 0.0
-    for v in range(vertex_nodes.shape[0]):
-        total += _bend_local(q, d1, vertex_nodes, vertex_edges, v, kappa_bar[v, 0], kappa_bar[v, 1],
-                             A1 / voronoi[v], 1, g8, H8)
-        expand_vertex_gradient(g8, g11)
-        vertex_dofs(vertex_nodes, vertex_edges, v, dofs)
-        scatter_gradient(grad, dofs, g11, 1.0)
+    for v in range(vertex_edges.shape[0]):
+        total += _bend_local(ed, vertex_edges, v, kappa_bar[v, 0], kappa_bar[v, 1], A1 / voronoi[v], 1, g8, H8,
+                             work)
+        scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
+                                vertex_edges[v, 0], vertex_edges[v, 1], g8)
     return total
 
 
 @njit(cache=True)
-def bend_hessian(q, d1, vertex_nodes, vertex_edges, kappa_bar, voronoi, A1, grad, ab, kl, ku, perm):
+def bend_hessian(ed, vertex_nodes, vertex_edges, kappa_bar, voronoi, A1, grad, ab, kl, ku, perm):
     """Add gradient to ``grad`` and Hessian to the band matrix ``ab``; returns the energy."""
     g8 = np.empty(8)
-    g11 = np.empty(11)
     H8 = np.empty((8, 8))
     H11 = np.empty((11, 11))
+    work = np.empty((5, 8))
     dofs = np.empty(11, dtype=np.int64)
     total = 0.0
-    for v in range(vertex_nodes.shape[0]):
-        total += _bend_local(q, d1, vertex_nodes, vertex_edges, v, kappa_bar[v, 0], kappa_bar[v, 1],
-                             A1 / voronoi[v], 2, g8, H8)
-        expand_vertex_gradient(g8, g11)
+    for v in range(vertex_edges.shape[0]):
+        total += _bend_local(ed, vertex_edges, v, kappa_bar[v, 0], kappa_bar[v, 1], A1 / voronoi[v], 2, g8, H8,
+                             work)
+        scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
+                                vertex_edges[v, 0], vertex_edges[v, 1], g8)
         expand_vertex_hessian(H8, H11)
         vertex_dofs(vertex_nodes, vertex_edges, v, dofs)
-        scatter_gradient(grad, dofs, g11, 1.0)
         scatter_band(ab, kl, ku, perm, dofs, H11, 1.0)
     return total

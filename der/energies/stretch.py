@@ -65,12 +65,14 @@ def stretch_gradient(q, edge_nodes, l_bar, k, lam, grad):
     """Add the stretching gradient to ``grad``; returns the energy."""
     g6 = np.empty(6)
     H6 = np.empty((6, 6))
-    dofs = np.empty(6, dtype=np.int64)
     total = 0.0
     for j in range(edge_nodes.shape[0]):
         total += _stretch_local(q, edge_nodes, j, l_bar[j], k[j], lam[j], 1, g6, H6)
-        edge_dofs(edge_nodes, j, dofs)
-        scatter_gradient(grad, dofs, g6, 1.0)
+        a = 4 * edge_nodes[j, 0]
+        b = 4 * edge_nodes[j, 1]
+        for i in range(3):
+            grad[a + i] += g6[i]
+            grad[b + i] += g6[3 + i]
     return total
 
 

@@ -14,8 +14,8 @@ import numpy as np
 from numba import njit
 
 from ..stencils import (
-    add_cross_matrix, add_outer, add_sym_outer, expand_vertex_gradient, expand_vertex_hessian, node,
-    scatter_band, scatter_gradient, vadd, vcross, vdot, vertex_dofs, vnorm, vscale, vsub,
+    add_cross_matrix, add_outer, add_sym_outer, edge_vectors, expand_vertex_hessian, scatter_band,
+    scatter_vertex_gradient, vadd, vcross, vdot, vertex_dofs, vscale,
 )
 
 
@@ -26,24 +26,19 @@ def material_twist(q, vertex_edges, reference_twist, v):
 
 
 @njit(cache=True)
-def _twist_local(q, vertex_nodes, vertex_edges, reference_twist, v, mbar, stiff, order, g8, H8):
+def _twist_local(q, ed, vertex_edges, reference_twist, v, mbar, stiff, order, g8, H8, work):
+    """Energy of vertex v; with order >= 1 its gradient in (e, f, theta_e, theta_f), order >= 2 the Hessian.
+    ``ed`` from ``geometry.edge_frames`` (only its tangents and lengths are used)."""
     m = material_twist(q, vertex_edges, reference_twist, v)
     r = m - mbar
     energy = 0.5 * stiff * r * r
     if order == 0:
         return energy
-    x0 = node(q, vertex_nodes[v, 0])
-    x1 = node(q, vertex_nodes[v, 1])
-    x2 = node(q, vertex_nodes[v, 2])
-    e = vsub(x1, x0)
-    f = vsub(x2, x1)
-    le = vnorm(e)
-    lf = vnorm(f)
-    te = vscale(1.0 / le, e)
-    tf = vscale(1.0 / lf, f)
+    te, le, _, _ = edge_vectors(ed, vertex_edges[v, 0])
+    tf, lf, _, _ = edge_vectors(ed, vertex_edges[v, 1])
     chi = 1.0 + vdot(te, tf)
     kb = vscale(2.0 / chi, vcross(te, tf))
-    dm = np.empty(8)
+    dm = work[0]
     for i in range(3):
         dm[i] = 0.5 * kb[i] / le
         dm[3 + i] = 0.5 * kb[i] / lf
@@ -60,7 +55,8 @@ def _twist_local(q, vertex_nodes, vertex_edges, reference_twist, v, mbar, stiff,
     tt = vscale(1.0 / chi, vadd(te, tf))
     add_sym_outer(H8, 0, 0, -s / (4.0 * le * le), kb, vadd(te, tt))
     add_sym_outer(H8, 3, 3, -s / (4.0 * lf * lf), kb, vadd(tf, tt))
-    Bef = np.zeros((3, 3))
+    Bef = work[2:5, 0:3]
+    Bef[:, :] = 0.0
     add_cross_matrix(Bef, 0, 0, s / (le * lf * chi), te)
     add_outer(Bef, 0, 0, -s / (2.0 * le * lf), kb, tt)
     for i in range(3):
@@ -71,50 +67,46 @@ def _twist_local(q, vertex_nodes, vertex_edges, reference_twist, v, mbar, stiff,
 
 
 @njit(cache=True)
-def twist_energy(q, vertex_nodes, vertex_edges, reference_twist, twist_bar, voronoi, A2):
-    """Total twisting energy."""
-    g8 = np.empty(8)
-    H8 = np.empty((8, 8))
+def twist_energy(q, vertex_edges, reference_twist, twist_bar, voronoi, A2):
+    """Total twisting energy (it depends on the centreline only through the reference twist)."""
     total = 0.0
-    for v in range(vertex_nodes.shape[0]):
-        total += _twist_local(q, vertex_nodes, vertex_edges, reference_twist, v, twist_bar[v],
-                              A2 / voronoi[v], 0, g8, H8)
+    for v in range(vertex_edges.shape[0]):
+        r = material_twist(q, vertex_edges, reference_twist, v) - twist_bar[v]
+        total += 0.5 * A2 / voronoi[v] * r * r
     return total
 
 
 @njit(cache=True)
-def twist_gradient(q, vertex_nodes, vertex_edges, reference_twist, twist_bar, voronoi, A2, grad):
-    """Add the twisting energy gradient to ``grad``; returns the energy."""
+def twist_gradient(q, ed, vertex_nodes, vertex_edges, reference_twist, twist_bar, voronoi, A2, grad):
+    """Add the twisting energy gradient to ``grad``; returns the energy. ``ed = geometry.edge_frames(...)``."""
     g8 = np.empty(8)
-    g11 = np.empty(11)
     H8 = np.empty((8, 8))
-    dofs = np.empty(11, dtype=np.int64)
+    work = np.empty((5, 8))
     total = 0.0
-    for v in range(vertex_nodes.shape[0]):
-        total += _twist_local(q, vertex_nodes, vertex_edges, reference_twist, v, twist_bar[v],
-                              A2 / voronoi[v], 1, g8, H8)
-        expand_vertex_gradient(g8, g11)
-        vertex_dofs(vertex_nodes, vertex_edges, v, dofs)
-        scatter_gradient(grad, dofs, g11, 1.0)
+    for v in range(vertex_edges.shape[0]):
+        total += _twist_local(q, ed, vertex_edges, reference_twist, v, twist_bar[v], A2 / voronoi[v], 1, g8, H8,
+                              work)
+        scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
+                                vertex_edges[v, 0], vertex_edges[v, 1], g8)
     return total
 
 
 @njit(cache=True)
-def twist_hessian(q, vertex_nodes, vertex_edges, reference_twist, twist_bar, voronoi, A2, grad, ab, kl, ku,
+def twist_hessian(q, ed, vertex_nodes, vertex_edges, reference_twist, twist_bar, voronoi, A2, grad, ab, kl, ku,
                   perm):
     """Add gradient to ``grad`` and Hessian to the band matrix ``ab``; returns the energy."""
     g8 = np.empty(8)
-    g11 = np.empty(11)
     H8 = np.empty((8, 8))
     H11 = np.empty((11, 11))
+    work = np.empty((5, 8))
     dofs = np.empty(11, dtype=np.int64)
     total = 0.0
-    for v in range(vertex_nodes.shape[0]):
-        total += _twist_local(q, vertex_nodes, vertex_edges, reference_twist, v, twist_bar[v],
-                              A2 / voronoi[v], 2, g8, H8)
-        expand_vertex_gradient(g8, g11)
+    for v in range(vertex_edges.shape[0]):
+        total += _twist_local(q, ed, vertex_edges, reference_twist, v, twist_bar[v], A2 / voronoi[v], 2, g8, H8,
+                              work)
+        scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
+                                vertex_edges[v, 0], vertex_edges[v, 1], g8)
         expand_vertex_hessian(H8, H11)
         vertex_dofs(vertex_nodes, vertex_edges, v, dofs)
-        scatter_gradient(grad, dofs, g11, 1.0)
         scatter_band(ab, kl, ku, perm, dofs, H11, 1.0)
     return total

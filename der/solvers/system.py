@@ -16,13 +16,11 @@ spurious distributed load of relative size ``r``.
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from ..constraints import apply_targets, fixed_dofs
-from ..energies.bend import _bend_local
-from ..energies.stretch import _stretch_local, elongations
-from ..energies.twist import _twist_local
-from ..geometry import transport_frames
+from ..diagnostics import _edge_forces
+from ..energies.stretch import elongations
+from ..geometry import edge_frames, transport_frames
 from ..linalg import band_layout, band_matvec, new_band
 from ..loads import DistributedForce, EndForce, EndTorque, PointForce, TwistingMoment
 from ..scene import COUNTER_NAMES, evaluate, make_plan
@@ -114,54 +112,14 @@ def evaluate_system(system, state, order):
                     system.fext, system.ab, system.kl, system.ku, system.perm)
 
 
-@njit(cache=True)
-def _internal_maxima(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_stretch,
-                     kappa_bar, twist_bar, voronoi, A1, A2, has_stretch, has_bend, has_twist):
-    """Largest internal force (across an edge) and internal moment (at a vertex)."""
-    n = edge_nodes.shape[0]
-    F = np.zeros((n, 3))
-    g6 = np.empty(6)
-    H6 = np.empty((6, 6))
-    g8 = np.empty(8)
-    H8 = np.empty((8, 8))
-    if has_stretch:
-        for j in range(n):
-            _stretch_local(q, edge_nodes, j, l_bar[j], k_stretch[j], lam[j], 1, g6, H6)
-            for i in range(3):
-                F[j, i] += g6[3 + i]
-    m_max = 0.0
-    for v in range(vertex_nodes.shape[0]):
-        a = vertex_edges[v, 0]
-        b = vertex_edges[v, 1]
-        m2 = 0.0
-        if has_bend:
-            s = A1 / voronoi[v]
-            e = _bend_local(q, d1, vertex_nodes, vertex_edges, v, kappa_bar[v, 0], kappa_bar[v, 1], s, 1, g8, H8)
-            for i in range(3):
-                F[a, i] += g8[i]
-                F[b, i] += g8[3 + i]
-            m2 += 2.0 * e * s   # |bending moment|^2 = (A1/D)^2 |kappa - kappa_bar|^2 = 2 E_v A1/D
-        if has_twist:
-            s = A2 / voronoi[v]
-            e = _twist_local(q, vertex_nodes, vertex_edges, reference_twist, v, twist_bar[v], s, 1, g8, H8)
-            for i in range(3):
-                F[a, i] += g8[i]
-                F[b, i] += g8[3 + i]
-            m2 += 2.0 * e * s
-        m_max = max(m_max, np.sqrt(m2))
-    f_max = 0.0
-    for j in range(n):
-        f_max = max(f_max, np.sqrt(F[j, 0] ** 2 + F[j, 1] ** 2 + F[j, 2] ** 2))
-    return f_max, m_max
-
-
 def load_scales(system, state):
     """(F_s, M_s): force and moment scales of the residual (see module docstring)."""
     rod, plan = system.rod, system.plan
-    f_int, m_int = _internal_maxima(state.q, state.d1, state.reference_twist, state.lam, rod.edge_nodes,
-                                    rod.vertex_nodes, rod.vertex_edges, rod.l_bar, plan.k_stretch, rod.kappa_bar,
-                                    rod.twist_bar, rod.voronoi, rod.A1, rod.A2, plan.has_stretch, plan.has_bend,
-                                    plan.has_twist)
+    F, M = _edge_forces(state.q, state.d1, state.reference_twist, state.lam, rod.edge_nodes, rod.vertex_nodes,
+                        rod.vertex_edges, rod.l_bar, plan.k_stretch, rod.kappa_bar, rod.twist_bar, rod.voronoi,
+                        rod.A1, rod.A2, plan.has_stretch, plan.has_bend, plan.has_twist)
+    f_int = float(np.sqrt((F * F).sum(axis=1)).max()) if F.size else 0.0
+    m_int = float(M.max()) if M.size else 0.0
     L = rod.length
     F_s = max(system.applied_force, f_int)
     M_s = max(system.applied_moment, m_int)
@@ -277,9 +235,9 @@ def energy_terms(system, state):
     if plan.has_stretch:
         out["stretch"] = float(stretch_energy(state.q, rod.edge_nodes, rod.l_bar, plan.k_stretch, state.lam))
     if plan.has_bend:
-        out["bend"] = float(bend_energy(state.q, state.d1, rod.vertex_nodes, rod.vertex_edges, rod.kappa_bar,
-                                        rod.voronoi, rod.A1))
+        ed = edge_frames(state.q, rod.edge_nodes, state.d1)
+        out["bend"] = float(bend_energy(ed, rod.vertex_edges, rod.kappa_bar, rod.voronoi, rod.A1))
     if plan.has_twist:
-        out["twist"] = float(twist_energy(state.q, rod.vertex_nodes, rod.vertex_edges, state.reference_twist,
-                                          rod.twist_bar, rod.voronoi, rod.A2))
+        out["twist"] = float(twist_energy(state.q, rod.vertex_edges, state.reference_twist, rod.twist_bar,
+                                          rod.voronoi, rod.A2))
     return out

@@ -1,0 +1,259 @@
+"""Throughput of the energy kernels: numba against a plain vectorised NumPy implementation, side by side.
+
+    python tools/bench_kernels.py [--json] [--repeat 7] [--n 100 1000 10000]
+
+For each n (edges) it times one full gradient evaluation (stretch + bend + twist) and one gradient + Hessian
+evaluation (banded), with der's numba kernels and with the NumPy version written below (same formulas,
+vectorised over vertices, scattered with np.add.at), on the same random configuration of a helix. It first
+checks that both give the same numbers. Reported: median seconds over ``--repeat`` runs, node-evaluations per
+second and the NumPy/numba ratio. Compilation is excluded (warm-up call first) and reported apart.
+"""
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+
+import der  # noqa: E402
+from der.geometry import transport_frames  # noqa: E402
+from der.linalg import band_layout, new_band  # noqa: E402
+from der.scene import evaluate, make_plan  # noqa: E402
+
+# ---------------------------------------------------------------------------------------------
+# the NumPy reference implementation (vectorised over edges and vertices)
+# ---------------------------------------------------------------------------------------------
+
+
+def _dot(a, b):
+    return np.einsum("ij,ij->i", a, b)
+
+
+def _outer(a, b):
+    return a[:, :, None] * b[:, None, :]
+
+
+def _crossmat(a):
+    z = np.zeros(len(a))
+    return np.stack([np.stack([z, -a[:, 2], a[:, 1]], 1), np.stack([a[:, 2], z, -a[:, 0]], 1),
+                     np.stack([-a[:, 1], a[:, 0], z], 1)], 1)
+
+
+def _sym(a, b):
+    return _outer(a, b) + _outer(b, a)
+
+
+_B = np.zeros((8, 11))   # local (e, f, theta_e, theta_f) <- the 11 stencil DOFs
+for _i in range(3):
+    _B[_i, 4 + _i], _B[_i, _i] = 1.0, -1.0          # e = x1 - x0
+    _B[3 + _i, 8 + _i], _B[3 + _i, 4 + _i] = 1.0, -1.0   # f = x2 - x1
+_B[6, 3] = _B[7, 7] = 1.0
+
+
+def numpy_evaluate(rod, q, d1, ref_twist, k, lam, hessian, kl, ku, perm):
+    en, vn, ve = rod.edge_nodes, rod.vertex_nodes, rod.vertex_edges
+    nn, ne, nv = rod.n_nodes, rod.n_edges, rod.n_vertices
+    X = q.reshape(-1, 4)
+    x, theta = X[:, :3], X[:ne, 3]
+    e = x[en[:, 1]] - x[en[:, 0]]
+    le = np.linalg.norm(e, axis=1)
+    t = e / le[:, None]
+    grad = np.zeros((nn, 4))
+    # stretch
+    tension = lam + k * (le - rod.l_bar)
+    np.add.at(grad[:, :3], en[:, 1], tension[:, None] * t)
+    np.add.at(grad[:, :3], en[:, 0], -tension[:, None] * t)
+    # frames
+    d2 = np.cross(t, d1)
+    c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
+    m1, m2 = c * d1 + s * d2, -s * d1 + c * d2
+    ie, jf = ve[:, 0], ve[:, 1]
+    te, tf, lE, lF = t[ie], t[jf], le[ie][:, None], le[jf][:, None]
+    chi = (1.0 + _dot(te, tf))[:, None]
+    kb = 2.0 * np.cross(te, tf) / chi
+    m1e, m2e, m1f, m2f = m1[ie], m2[ie], m1[jf], m2[jf]
+    k1 = 0.5 * _dot(kb, m2e + m2f)
+    k2 = -0.5 * _dot(kb, m1e + m1f)
+    sb = rod.A1 / rod.voronoi
+    r1, r2 = k1 - rod.kappa_bar[:, 0], k2 - rod.kappa_bar[:, 1]
+    tt = (te + tf) / chi
+    dd1, dd2 = (m1e + m1f) / chi, (m2e + m2f) / chi
+    a1, a2 = np.cross(tf, dd2), np.cross(te, dd2)
+    b1, b2 = np.cross(tf, dd1), np.cross(te, dd1)
+    dk1 = np.zeros((nv, 8))
+    dk2 = np.zeros((nv, 8))
+    dk1[:, 0:3] = (-k1[:, None] * tt + a1) / lE
+    dk1[:, 3:6] = (-k1[:, None] * tt - a2) / lF
+    dk2[:, 0:3] = (-k2[:, None] * tt - b1) / lE
+    dk2[:, 3:6] = (-k2[:, None] * tt + b2) / lF
+    kb_m1e, kb_m1f, kb_m2e, kb_m2f = _dot(kb, m1e), _dot(kb, m1f), _dot(kb, m2e), _dot(kb, m2f)
+    dk1[:, 6], dk1[:, 7] = -0.5 * kb_m1e, -0.5 * kb_m1f
+    dk2[:, 6], dk2[:, 7] = -0.5 * kb_m2e, -0.5 * kb_m2f
+    # twist
+    st = rod.A2 / rod.voronoi
+    mt = theta[jf] - theta[ie] + ref_twist
+    rt = mt - rod.twist_bar
+    dm = np.zeros((nv, 8))
+    dm[:, 0:3] = 0.5 * kb / lE
+    dm[:, 3:6] = 0.5 * kb / lF
+    dm[:, 6], dm[:, 7] = -1.0, 1.0
+    g8 = (sb * r1)[:, None] * dk1 + (sb * r2)[:, None] * dk2 + (st * rt)[:, None] * dm
+    g11 = g8 @ _B
+    dofs = np.concatenate([4 * vn[:, :1] + np.arange(3), 4 * ie[:, None] + 3, 4 * vn[:, 1:2] + np.arange(3),
+                           4 * jf[:, None] + 3, 4 * vn[:, 2:3] + np.arange(3)], axis=1)
+    flat = grad.ravel()
+    np.add.at(flat, dofs.ravel(), g11.ravel())
+    if not hessian:
+        return flat, None
+    # Hessian: Gauss-Newton part + curvature of kappa1, kappa2 and of the twist
+    H = (sb[:, None, None] * (_outer(dk1, dk1) + _outer(dk2, dk2)) + st[:, None, None] * _outer(dm, dm))
+    s1, s2, s3 = (sb * r1)[:, None, None], (sb * r2)[:, None, None], (st * rt)[:, None, None]
+    I3 = np.eye(3)[None]
+    k1_, k2_ = k1[:, None, None], k2[:, None, None]
+    chi_, lE_, lF_ = chi[:, :, None], lE[:, :, None], lF[:, :, None]
+    tete, tftf, tttt = _outer(te, te), _outer(tf, tf), _outer(tt, tt)
+    ee = (s1 * (2 * k1_ * tttt / lE_ ** 2 - _sym(a1, tt) / lE_ ** 2 - k1_ / (chi_ * lE_ ** 2) * (I3 - tete)
+                + _sym(kb, m2e) / (4 * lE_ ** 2))
+          + s2 * (2 * k2_ * tttt / lE_ ** 2 + _sym(b1, tt) / lE_ ** 2 - k2_ / (chi_ * lE_ ** 2) * (I3 - tete)
+                  - _sym(kb, m1e) / (4 * lE_ ** 2))
+          - s3 * _sym(kb, te + tt) / (4 * lE_ ** 2))
+    ff = (s1 * (2 * k1_ * tttt / lF_ ** 2 + _sym(a2, tt) / lF_ ** 2 - k1_ / (chi_ * lF_ ** 2) * (I3 - tftf)
+                + _sym(kb, m2f) / (4 * lF_ ** 2))
+          + s2 * (2 * k2_ * tttt / lF_ ** 2 - _sym(b2, tt) / lF_ ** 2 - k2_ / (chi_ * lF_ ** 2) * (I3 - tftf)
+                  - _sym(kb, m1f) / (4 * lF_ ** 2))
+          - s3 * _sym(kb, tf + tt) / (4 * lF_ ** 2))
+    lelf = lE_ * lF_
+    ef = (-(s1 * k1_ + s2 * k2_) / (chi_ * lelf) * (I3 + _outer(te, tf)) + 2 * (s1 * k1_ + s2 * k2_) * tttt / lelf
+          + s1 * (-_outer(a1, tt) + _outer(tt, a2) - _crossmat(dd2)) / lelf
+          + s2 * (_outer(b1, tt) - _outer(tt, b2) + _crossmat(dd1)) / lelf
+          + s3 * (_crossmat(te) / chi_ - 0.5 * _outer(kb, tt)) / lelf)
+    H[:, 0:3, 0:3] += ee
+    H[:, 3:6, 3:6] += ff
+    H[:, 0:3, 3:6] += ef
+    H[:, 3:6, 0:3] += np.transpose(ef, (0, 2, 1))
+    H[:, 6, 6] += s1[:, 0, 0] * (-0.5 * kb_m2e) + s2[:, 0, 0] * (0.5 * kb_m1e)
+    H[:, 7, 7] += s1[:, 0, 0] * (-0.5 * kb_m2f) + s2[:, 0, 0] * (0.5 * kb_m1f)
+    cols = []
+    for s_, m_, kbm in ((s1, m1e, kb_m1e), (s1, m1f, kb_m1f), (s2, m2e, kb_m2e), (s2, m2f, kb_m2f)):
+        ce = s_[:, :, 0] / lE * (0.5 * kbm[:, None] * tt - np.cross(tf, m_) / chi)
+        cf = s_[:, :, 0] / lF * (0.5 * kbm[:, None] * tt + np.cross(te, m_) / chi)
+        cols.append((ce, cf))
+    for (ce, cf), col in zip(cols, (6, 7, 6, 7)):
+        H[:, 0:3, col] += ce
+        H[:, col, 0:3] += ce
+        H[:, 3:6, col] += cf
+        H[:, col, 3:6] += cf
+    H11 = np.einsum("ai,nab,bj->nij", _B, H, _B)
+    # stretch Hessian blocks
+    cT = (tension / le)[:, None, None]
+    Hs = (k[:, None, None] - cT) * _outer(t, t) + cT * np.eye(3)[None]
+    ab = new_band(rod.n_dof, kl, ku)
+    rows = perm[dofs][:, :, None]
+    colsj = perm[dofs][:, None, :]
+    np.add.at(ab, (kl + ku + rows - colsj, np.broadcast_to(colsj, H11.shape)), H11)
+    sd = np.concatenate([4 * en[:, :1] + np.arange(3), 4 * en[:, 1:2] + np.arange(3)], axis=1)
+    H6 = np.block([[Hs, -Hs], [-Hs, Hs]])
+    r6, c6 = perm[sd][:, :, None], perm[sd][:, None, :]
+    np.add.at(ab, (kl + ku + r6 - c6, np.broadcast_to(c6, H6.shape)), H6)
+    return flat, ab
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+def timed(fn, repeat):
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
+def setup(n, rng):
+    rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, max(1.0, n / 100), n), 1.0, 1.5)
+    base = rod.rest_state()
+    st = base.copy()
+    st.q += 1e-3 * rng.standard_normal(st.q.shape)
+    st.q[-1] = 0.0
+    transport_frames(st.q, rod.edge_nodes, rod.vertex_edges, base.tangents, base.d1, base.reference_twist,
+                     st.tangents, st.d1, st.reference_twist)
+    k = 10.0 * rod.A1 / rod.l_bar ** 3
+    lam = 0.1 * rng.standard_normal(rod.n_edges)
+    return rod, st, k, lam
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, nargs="+", default=[100, 1000, 10000])
+    ap.add_argument("--repeat", type=int, default=7)
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args(argv)
+    rng = np.random.default_rng(0)
+    t0 = time.perf_counter()
+    rod, st, k, lam = setup(20, rng)
+    plan = make_plan(der.Scene(rod), k)
+    kl, ku, perm = band_layout(rod.n_nodes, rod.closed)
+    g, f, ab = np.zeros(rod.n_dof), np.zeros(rod.n_dof), new_band(rod.n_dof, kl, ku)
+    evaluate(plan, st.q, st.d1, st.reference_twist, lam, 2, g, f, ab, kl, ku, perm)
+    compile_s = time.perf_counter() - t0
+    rows = []
+    for n in args.n:
+        rod, st, k, lam = setup(n, rng)
+        plan = make_plan(der.Scene(rod), k)
+        kl, ku, perm = band_layout(rod.n_nodes, rod.closed)
+        g, f, ab = np.zeros(rod.n_dof), np.zeros(rod.n_dof), new_band(rod.n_dof, kl, ku)
+
+        def numba_grad():
+            evaluate(plan, st.q, st.d1, st.reference_twist, lam, 1, g, f, ab, kl, ku, perm)
+
+        def numba_hess():
+            evaluate(plan, st.q, st.d1, st.reference_twist, lam, 2, g, f, ab, kl, ku, perm)
+
+        # same numbers? (the numba Jacobian also holds the frame-transport term; compare the gradient and the
+        # symmetric part of the band)
+        gn, abn = numpy_evaluate(rod, st.q, st.d1, st.reference_twist, k, lam, True, kl, ku, perm)
+        numba_hess()
+        g_err = np.abs(gn - g).max() / np.abs(g).max()
+        from der.geometry import add_transport_jacobian
+        abt = new_band(rod.n_dof, kl, ku)
+        add_transport_jacobian(st.q, rod.edge_nodes, g[3::4][: rod.n_edges].copy(), abt, kl, ku, perm)
+        h_err = np.abs(abn - (ab - abt)).max() / np.abs(ab).max()
+        assert g_err < 1e-9 and h_err < 1e-9, (g_err, h_err)
+        r = {"n": n, "grad_numba_s": timed(numba_grad, args.repeat),
+             "grad_numpy_s": timed(lambda: numpy_evaluate(rod, st.q, st.d1, st.reference_twist, k, lam, False,
+                                                          kl, ku, perm), args.repeat),
+             "hess_numba_s": timed(numba_hess, args.repeat),
+             "hess_numpy_s": timed(lambda: numpy_evaluate(rod, st.q, st.d1, st.reference_twist, k, lam, True,
+                                                          kl, ku, perm), args.repeat),
+             "max_rel_diff_grad": g_err, "max_rel_diff_hess": h_err}
+        r["grad_ratio"] = r["grad_numpy_s"] / r["grad_numba_s"]
+        r["hess_ratio"] = r["hess_numpy_s"] / r["hess_numba_s"]
+        r["grad_node_evals_per_s"] = rod.n_nodes / r["grad_numba_s"]
+        r["hess_node_evals_per_s"] = rod.n_nodes / r["hess_numba_s"]
+        rows.append(r)
+    ns = np.array([r["n"] for r in rows], float)
+    exps = {}
+    if len(ns) > 1:
+        for key in ("grad_numba_s", "hess_numba_s"):
+            exps[key.replace("_s", "_exponent")] = float(np.polyfit(np.log(ns), np.log([r[key] for r in rows]), 1)[0])
+    print(f"compile (or cache load): {compile_s:.2f} s   machine: {platform.processor() or platform.machine()}, "
+          f"{os.cpu_count()} cores, numpy {np.__version__}")
+    print(f"{'n':>7} {'grad numba':>11} {'grad numpy':>11} {'ratio':>7} {'hess numba':>11} {'hess numpy':>11} "
+          f"{'ratio':>7} {'node-evals/s (grad)':>20}")
+    for r in rows:
+        print(f"{r['n']:>7} {r['grad_numba_s']:>11.2e} {r['grad_numpy_s']:>11.2e} {r['grad_ratio']:>7.1f} "
+              f"{r['hess_numba_s']:>11.2e} {r['hess_numpy_s']:>11.2e} {r['hess_ratio']:>7.1f} "
+              f"{r['grad_node_evals_per_s']:>20.3e}")
+    if exps:
+        print("time ~ n^p: " + ", ".join(f"{k} = {v:.2f}" for k, v in exps.items()))
+    if args.json:
+        print(json.dumps({"compile_s": compile_s, "rows": rows, **exps}))
+
+
+if __name__ == "__main__":
+    main()

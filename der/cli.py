@@ -118,7 +118,7 @@ def scenario_main(name, description, parameters, run, n_default=100, n_min=2, ar
             raise ValueError(f"--tol must be a finite number > 0; got {args.tol}")
         for pname, _, ptype, _ in parameters:
             v = getattr(args, pname.replace("-", "_"))
-            if ptype is float and not math.isfinite(v):
+            if ptype is float and v is not None and not math.isfinite(v):
                 raise ValueError(f"--{pname} must be finite; got {v}")
         if args.rrd:
             parent = os.path.dirname(os.path.abspath(args.rrd))

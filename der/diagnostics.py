@@ -16,7 +16,9 @@ at the interior vertices (edge values averaged onto vertices), with ``xi`` the r
   vertex Frenet frame. This is paper Eq. 28 in the continuum limit.
 * ``F``: the force transmitted across each edge by the part beyond it (paper's convention: at a free end F
   equals the applied end force), ``F_j = sum over energy terms of dE/de_j`` -- exact for the discrete rod,
-  in equilibrium or not. Components (F_t, F_n, F_b) in the edge Frenet frame.
+  in equilibrium or not. In ``profile`` it is averaged onto vertices (at the two vertices next to the end
+  edges of an open rod, which carry the end loads and clamps, the inner edge's value is used) and resolved
+  on the vertex Frenet frame (F_t, F_n, F_b).
 """
 import numpy as np
 from numba import njit
@@ -168,11 +170,14 @@ def _edge_forces(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_e
 def internal_forces(rod, state, k_stretch=None, energies=("stretch", "bend", "twist")):
     """Internal force across each edge (force units), shape (n_edges, 3): F_j = sum of dE/de_j.
 
-    For an inextensible rod the tension is carried by the multipliers ``state.lam``; ``k_stretch`` is the
-    solver's axial penalty (default: the one the solve used is folded into lam, so only lam is counted).
+    The tension of an inextensible rod is ``lam + penalty g`` with the multipliers and penalty the solver left
+    in the state; of an extensible rod, EA times the strain. ``k_stretch`` overrides the penalty.
     """
     if k_stretch is None:
-        k_stretch = np.zeros(rod.n_edges) if rod.inextensible else rod.EA / rod.l_bar
+        if state.penalty is not None:
+            k_stretch = state.penalty
+        else:
+            k_stretch = np.zeros(rod.n_edges) if rod.inextensible else rod.EA / rod.l_bar
     lam = state.lam if state.lam.size == rod.n_edges else np.zeros(rod.n_edges)
     return _edge_forces(state.q, state.d1, state.reference_twist, lam, rod.edge_nodes, rod.vertex_nodes,
                         rod.vertex_edges, rod.l_bar, np.asarray(k_stretch, float), rod.kappa_bar, rod.twist_bar,
@@ -197,6 +202,10 @@ def profile(rod, state, k_stretch=None, min_curvature=1e-8):
     F = internal_forces(rod, state, k_stretch)
     e, f = rod.vertex_edges[:, 0], rod.vertex_edges[:, 1]
     Fv = 0.5 * (F[e] + F[f])
+    if not rod.closed:
+        # the end edges carry the end loads and the clamps (their cut forces are split): use the inner edge
+        Fv[0] = F[f[0]]
+        Fv[-1] = F[e[-1]]
     al = alpha(rod, state, min_curvature)
     av = 0.5 * (al[e] + _unwrap_near(al[f], al[e]))
     return {
@@ -212,3 +221,43 @@ def profile(rod, state, k_stretch=None, min_curvature=1e-8):
 
 def _unwrap_near(a, ref):
     return ref + (a - ref + np.pi) % (2 * np.pi) - np.pi
+
+
+def rotation_vector(R):
+    """Rotation vector (axis * angle, radians) of a rotation matrix R (the log map), angle in [0, pi]."""
+    R = np.asarray(R, float)
+    c = np.clip(0.5 * (np.trace(R) - 1.0), -1.0, 1.0)
+    angle = np.arccos(c)
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    s = np.sin(angle)
+    if angle < 1e-6:
+        return 0.5 * w * (1.0 + angle ** 2 / 6.0)
+    if np.pi - angle < 1e-6:
+        # near pi: axis from the symmetric part
+        B = 0.5 * (R + np.eye(3))
+        axis = B[np.argmax(np.diag(B))]
+        return angle * axis / np.linalg.norm(axis)
+    return angle / (2.0 * s) * w
+
+
+def end_frame(rod, state, end="end"):
+    """(midpoint, 3x3 frame with rows t, m1, m2) of the end edge: the rod's end cross-section."""
+    j = 0 if end == "start" else rod.n_edges - 1
+    x = state.positions
+    a, b = rod.edge_nodes[j]
+    t = x[b] - x[a]
+    t = t / np.linalg.norm(t)
+    d2 = np.cross(t, state.d1[j])
+    c, s = np.cos(state.theta[j]), np.sin(state.theta[j])
+    m1 = c * state.d1[j] + s * d2
+    m2 = np.cross(t, m1)
+    return 0.5 * (x[a] + x[b]), np.stack([t, m1, m2])
+
+
+def end_motion(rod, state, end="end"):
+    """Displacement and rotation vector of an end cross-section relative to the rest state, both as
+    components in the rest end frame (t0, m1_0, m2_0) -- for a Frenet-aligned rest shape, (t0, n0, b0)."""
+    p0, F0 = end_frame(rod, rod.rest_state(), end)
+    p, F = end_frame(rod, state, end)
+    Q = F.T @ F0                       # maps rest frame vectors to current ones: Q F0[i] = F[i]
+    return F0 @ (p - p0), F0 @ rotation_vector(Q)

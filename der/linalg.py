@@ -119,3 +119,56 @@ def band_solve(ab, kl, ku, perm, rhs, overwrite=True):
     b[perm] = rhs
     _, _, xp, info = dgbsv(kl, ku, ab, b, overwrite_ab=overwrite, overwrite_b=True)
     return xp[perm], info
+
+
+@njit(cache=True)
+def band_negative_pivots(ab, kl, ku, perm, shift, mass, fixed):
+    """Number of negative eigenvalues of the symmetric matrix ``K - shift M`` (K in band storage, fixed DOFs
+    removed), by Sylvester's law of inertia on a banded LDL^T factorisation without pivoting.
+
+    Returns -1 if a pivot is too small for the count to be trusted (then the caller falls back)."""
+    n = ab.shape[1]
+    off = kl + ku
+    b = kl
+    inv = np.empty(n, dtype=np.int64)
+    for d in range(n):
+        inv[perm[d]] = d
+    # symmetric band, lower part: A[i, i - s] for s = 0..b, stored as low[i, s]
+    low = np.zeros((n, b + 1))
+    for i in range(n):
+        di = inv[i]
+        for s in range(0, min(b, i) + 1):
+            j = i - s
+            dj = inv[j]
+            if fixed[di] or fixed[dj]:
+                v = 1.0 if s == 0 else 0.0
+            else:
+                v = 0.5 * (ab[off + i - j, j] + ab[off + j - i, i])   # symmetric part
+                if s == 0:
+                    v -= shift * mass[di]
+            low[i, s] = v
+    L = np.zeros((n, b + 1))   # L[i, s] = l_{i, i-s}, unit diagonal implied
+    D = np.zeros(n)
+    scale = 0.0
+    for i in range(n):
+        scale = max(scale, abs(low[i, 0]))
+    negatives = 0
+    for k in range(n):
+        dk = low[k, 0]
+        for s in range(1, min(b, k) + 1):
+            j = k - s
+            dk -= L[k, s] * L[k, s] * D[j]
+        if abs(dk) <= 1e-13 * scale:
+            return -1
+        D[k] = dk
+        if dk < 0.0:
+            negatives += 1
+        for i in range(k + 1, min(n - 1, k + b) + 1):
+            s_ik = i - k
+            v = low[i, s_ik]
+            for s in range(1, min(b, k) + 1):
+                j = k - s
+                if i - j <= b:
+                    v -= L[i, i - j] * L[k, s] * D[j]
+            L[i, s_ik] = v / dk
+    return negatives

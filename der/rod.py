@@ -149,6 +149,8 @@ class RodState:
     tangents : (n_edges, 3) unit tangents the reference directors belong to.
     reference_twist : (n_vertices,) reference twist, unwrapped (continuous in time).
     lam : (n_edges,) tension multipliers of an inextensible rod (force); zeros otherwise.
+    penalty : (n_edges,) the axial penalty the solver used with ``lam`` (force/length), or None. The tension of
+        edge j is ``lam_j + penalty_j g_j`` (g the elongation); ``der.diagnostics`` uses it.
     """
 
     q: np.ndarray
@@ -156,10 +158,11 @@ class RodState:
     tangents: np.ndarray
     reference_twist: np.ndarray
     lam: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    penalty: np.ndarray | None = None
 
     def copy(self):
         return RodState(self.q.copy(), self.d1.copy(), self.tangents.copy(), self.reference_twist.copy(),
-                        self.lam.copy())
+                        self.lam.copy(), None if self.penalty is None else self.penalty.copy())
 
     @property
     def positions(self):

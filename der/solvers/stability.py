@@ -16,10 +16,10 @@ shift-invert mode around zero on the sparse matrix, the symmetry modes shifted a
 """
 import numpy as np
 
-from ..linalg import band_to_sparse
+from ..linalg import band_negative_pivots, band_to_sparse
 from .system import evaluate_system
 
-DENSE_MAX_EDGES = 500
+DENSE_MAX_DOFS = 300   # dense eigen-solver only for small systems (never above 500 edges)
 
 
 def symmetry_modes(system, state):
@@ -83,7 +83,7 @@ def stability(system, result, n_eigenvalues=6):
     V = _m_orthonormal(np.array(V).T if V else np.zeros((idx.size, 0)), m)
     k = max(1, min(n_eigenvalues, idx.size - V.shape[1] - 2))
     note = ""
-    if rod.n_edges <= DENSE_MAX_EDGES:
+    if idx.size <= DENSE_MAX_DOFS:
         s = 1.0 / np.sqrt(m)
         A = (Kf.toarray() * s[:, None]) * s[None, :]
         W = V * np.sqrt(m)[:, None]
@@ -97,6 +97,14 @@ def stability(system, result, n_eigenvalues=6):
     ev = ev[order][:k]
     tol = 1e3 * np.finfo(float).eps * scale
     lam_min = float(ev.real[0]) if ev.size else np.inf
+    if symmetric and idx.size > DENSE_MAX_DOFS:
+        # the shift-invert eigenvalues are those nearest zero: count all negative ones by inertia as a check
+        n_neg = band_negative_pivots(system.ab, system.kl, system.ku, system.perm, -tol, system.mass,
+                                     ~_free_full(system))
+        found = int(np.sum(ev.real < -tol))
+        if n_neg > found:
+            note = f"{n_neg} negative eigenvalues by inertia (the {found} nearest zero listed)"
+            lam_min = min(lam_min, -tol) if found == 0 else lam_min
     complex_pairs = bool((not symmetric) and np.any(np.abs(ev.imag) > max(tol, 1e-8 * np.abs(ev).max(initial=0))))
     stable = bool(lam_min > -tol)
     if not symmetric:
@@ -113,6 +121,13 @@ def stability(system, result, n_eigenvalues=6):
     result.flutter = complex_pairs
     result.stability_note = note
     return result
+
+
+def _free_full(system):
+    free = system.free.copy()
+    if not system.rod.closed:
+        free[4 * system.rod.n_nodes - 1] = False
+    return free
 
 
 def _m_orthonormal(V, m):

@@ -9,7 +9,8 @@ relative to the load scale per unit length:
 with ``R = f_ext - dE/dq``, ``w_i`` the rest length a DOF stands for (a node's Voronoi length, an edge's
 length), ``S_i`` the force scale ``F_s`` for node DOFs and the moment scale ``M_s`` for theta DOFs, and L the
 rod length. ``F_s`` (``M_s``) is the largest applied force (moment) -- point loads, distributed loads times
-L -- or internal force (moment) anywhere along the rod, which includes the reactions at the constraints.
+L -- or internal force (moment) anywhere along the rod, which includes the reactions at the constraints, and at
+least the other scale converted over the rod length (M_s / L, F_s L).
 Measured this way a tolerance means the same thing at every n: a residual ``r`` perturbs the solution like a
 spurious distributed load of relative size ``r``.
 """
@@ -121,15 +122,13 @@ def load_scales(system, state):
     f_int = float(np.sqrt((F * F).sum(axis=1)).max()) if F.size else 0.0
     m_int = float(M.max()) if M.size else 0.0
     L = rod.length
-    F_s = max(system.applied_force, f_int)
-    M_s = max(system.applied_moment, m_int)
-    if F_s == 0.0 and M_s == 0.0:
+    F_raw = max(system.applied_force, f_int)
+    M_raw = max(system.applied_moment, m_int)
+    if F_raw == 0.0 and M_raw == 0.0:
         return rod.A1 / L ** 2, rod.A1 / L
-    if F_s == 0.0:
-        F_s = M_s / L
-    if M_s == 0.0:
-        M_s = F_s * L
-    return F_s, M_s
+    # a force scale implies a moment scale over the rod length and vice versa (e.g. a rod loaded only by
+    # torques has no force of its own: round-off forces must not set the scale)
+    return max(F_raw, M_raw / L), max(M_raw, F_raw * L)
 
 
 def residual_vector(system):
@@ -203,6 +202,7 @@ def prepare_state(system, state):
     """A working copy of ``state`` with constraint targets applied and frames consistent with positions."""
     rod = system.rod
     work = state.copy()
+    work.penalty = system.k_stretch.copy()
     if work.lam.size != rod.n_edges:
         work.lam = np.zeros(rod.n_edges)
     if not rod.inextensible:

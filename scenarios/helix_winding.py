@@ -1,0 +1,238 @@
+"""Elongation and winding of a helix (paper Section 6.3.2, Eqs. 72-81, Figs. 1-2), with the corrected Eq. 78.
+
+A helix of ``turns`` turns (kappa0 = 1, omega0 = lam, A2 = 1, A1 = A) deformed into a uniform helix of axial
+elongation eta and overtwist phi. Two controls:
+
+* displacement (``--eta --phi``): both ends clamped on the deformed uniform helix (positions and frames); the
+  axial force P and axial torque T are measured in the middle of the rod;
+* force (``--P0 --phi``): the axial force through the helix axis is prescribed with the winding held; eta is
+  found by a secant iteration on displacement-controlled solves (a load-controlled test machine).
+
+Correct closed form (docs/derivations.md, "Helix winding"): a force along the axis has a binormal component,
+so F_t = P S1 (not P / S1 as in Eq. 78, S1 = t.e3), and P0 = P/(A2 omega0^2) = c sqrt(1+lam^2)/lam
+[c eta - 1 - A eta (c - 1/r)], c = 1 + phi, r = sqrt(1 + lam^2 (1 - eta^2)); the paper's Eq. 81 is S1^2 times it.
+``--figure 1`` / ``--figure 2`` regenerate the paper's Figures 1 and 2 (paper, corrected and simulated).
+
+    python scenarios/helix_winding.py [--A 0.67] [--lam 0.6] [--turns 3] [--eta 1.2] [--phi 0.1] [--P0 X]
+                                      [--figure 1|2] [--png PATH]
+"""
+import sys
+
+import numpy as np
+from scipy.optimize import brentq
+
+import der
+from der import closed_forms as cf
+from der import diagnostics as dg
+from der.cli import scenario_main
+from der.geometry import reference_twist_angle, tangents
+from der.rod import RodState, frenet_frame_of_shape
+
+PARAMETERS = [
+    ("A", 0.67, float, "A1/A2 (A2 = 1)"),
+    ("lam", 0.6, float, "omega0/kappa0 (kappa0 = 1)"),
+    ("turns", 1.0, float, "number of turns of the rest helix"),
+    ("eta", 1.2, float, "axial elongation (displacement control)"),
+    ("phi", 0.1, float, "overtwist (winding held)"),
+    ("P0", None, float, "axial force P/(A2 omega0^2): force control instead of --eta"),
+    ("figure", 0, int, "1 or 2: regenerate the paper's Figure 1 or 2 instead of one point"),
+    ("png", None, str, "with --figure: write the figure to this PNG (needs matplotlib)"),
+]
+
+
+def rest_rod(p):
+    return der.rod_from_shape(der.shapes.helix(1.0, p.lam, p.turns, p.n), p.A, 1.0)
+
+
+def deformed_state(rod, eta, phi, lam):
+    """The discrete uniform helix at (eta, phi) with the rod's edge lengths, material frame on its Frenet frame."""
+    g = cf.winding_geometry(eta, phi, lam)
+    a, S, S1 = float(g["a"]), float(g["S"]), float(g["S1"])
+    chord = float(rod.l_bar.mean())
+
+    def f(h):
+        return (2 * a * np.sin(S * h / 2)) ** 2 + (S1 * h) ** 2 - chord ** 2
+
+    h = brentq(f, 0.5 * chord, 2.0 * chord, xtol=1e-15, rtol=1e-15)
+    s = (np.arange(rod.n_nodes) - 0.5) * h
+    x = np.stack([a * np.cos(S * s), a * np.sin(S * s), S1 * s], axis=1)
+    t, d1, _ = frenet_frame_of_shape(x, False)
+    q = np.zeros(rod.n_dof)
+    q.reshape(-1, 4)[:, :3] = x
+    ref = np.array([reference_twist_angle(t[e], d1[e], t[f_], d1[f_]) for e, f_ in rod.vertex_edges])
+    return RodState(q, d1, tangents(q, rod.edge_nodes), ref, np.zeros(rod.n_edges))
+
+
+def measure(rod, state, lam):
+    """Axial force and torque (P0, T0) in the middle third, and the uniformity of kappa and omega there."""
+    F = dg.internal_forces(rod, state)
+    M = dg.internal_moments(rod, state)
+    mid_e = slice(rod.n_edges // 3, 2 * rod.n_edges // 3)
+    mid_v = slice(rod.n_vertices // 3, 2 * rod.n_vertices // 3)
+    P = F[mid_e, 2].mean()
+    T = M[mid_v, 2].mean()
+    prof = dg.profile(rod, state)
+    kap, om = prof["kappa"][mid_v], prof["omega"][mid_v]
+    uniformity = max(np.ptp(kap) / abs(kap.mean()), np.ptp(om) / abs(om.mean()))
+    horizontal = float(np.abs(F[mid_e, :2]).max() / max(abs(P), 1e-300))
+    return {"P0": P / lam ** 2, "T0": T / lam, "kappa": float(kap.mean()), "omega": float(om.mean()),
+            "uniformity": float(uniformity), "force_off_axis": horizontal,
+            "alpha_max_abs": float(np.nanmax(np.abs(dg.alpha(rod, state))))}
+
+
+def solve_at(p, solver, rod, eta, phi):
+    scene = der.Scene(rod, constraints=[der.clamp("start"), der.clamp("end")])
+    state = deformed_state(rod, eta, phi, p.lam)
+    result = solver.solve(scene, state=state)
+    return result, measure(rod, result.state, p.lam)
+
+
+def force_control(p, solver, rod, P0, phi):
+    """Secant iteration on eta until the measured axial force equals P0 (the winding phi held)."""
+    guess = cf.winding_eta(P0, phi, p.lam, p.A)
+    e0 = guess if np.isfinite(guess) else 1.0
+    e1 = e0 * (1 + 1e-3)
+    f0 = solve_at(p, solver, rod, e0, phi)[1]["P0"] - P0
+    for _ in range(30):
+        res, m = solve_at(p, solver, rod, e1, phi)
+        f1 = m["P0"] - P0
+        if abs(f1) <= 1e-10 * max(abs(P0), 1.0) or e1 == e0:
+            break
+        e0, e1, f0 = e1, e1 - f1 * (e1 - e0) / (f1 - f0), f1
+    return e1, res, m
+
+
+def point(p, solver, rod):
+    if p.P0 is None:
+        res, m = solve_at(p, solver, rod, p.eta, p.phi)
+        ref = np.array([cf.winding_P0(p.eta, p.phi, p.lam, p.A), cf.winding_T0(p.eta, p.phi, p.lam, p.A)])
+        sim = np.array([m["P0"], m["T0"]])
+        return {"control": "displacement", "eta": p.eta, "phi": p.phi, **m,
+                "P0_reference": ref[0], "T0_reference": ref[1],
+                "P0_paper": float(cf.paper_winding_P0(p.eta, p.phi, p.lam, p.A)),
+                "error": float(np.linalg.norm(sim - ref) / np.linalg.norm(ref)),
+                "paper_error": float(abs(m["P0"] - cf.paper_winding_P0(p.eta, p.phi, p.lam, p.A)) / abs(ref[0]))}
+    eta, res, m = force_control(p, solver, rod, p.P0, p.phi)
+    eta_ref = cf.winding_eta(p.P0, p.phi, p.lam, p.A)
+    eta_paper = cf.winding_eta(p.P0, p.phi, p.lam, p.A, corrected=False)
+    return {"control": "force", "eta": eta, "phi": p.phi, **m, "P0": p.P0, "eta_reference": eta_ref,
+            "eta_paper": eta_paper, "error": abs(eta - eta_ref) / abs(eta_ref),
+            "paper_error": abs(eta - eta_paper) / abs(eta_ref) if np.isfinite(eta_paper) else None}
+
+
+def figure(p, solver, rod_for):
+    """Tables of the paper's Figure 1 (P0 vs eta, phi = 0, lam = 0.5, 0.6, 0.7) or 2 (eta vs phi, lam = 0.6)."""
+    A = 0.67
+    curves, points = [], []
+    if p.figure == 1:
+        for lam in (0.5, 0.6, 0.7):
+            em = float(cf.winding_eta_max(lam))
+            eta = np.linspace(0.0, 0.995 * em, 300)
+            curves.append({"lam": lam, "eta": eta, "P0_corrected": cf.winding_P0(eta, 0.0, lam, A),
+                           "P0_paper": cf.paper_winding_P0(eta, 0.0, lam, A)})
+            q = _with(p, lam=lam, A=A)
+            rod = rod_for(q)
+            for e in np.linspace(0.6, 0.9 * em, 6):
+                _, m = solve_at(q, solver, rod, e, 0.0)
+                ref = float(cf.winding_P0(e, 0.0, lam, A))
+                points.append({"lam": lam, "eta": e, "P0_simulated": m["P0"], "P0_corrected": ref,
+                               "P0_paper": float(cf.paper_winding_P0(e, 0.0, lam, A)),
+                               "error": abs(m["P0"] - ref) / max(abs(ref), 1e-2)})
+    else:
+        lam = 0.6
+        q = _with(p, lam=lam, A=A)
+        rod = rod_for(q)
+        phis = np.linspace(-0.5, 0.5, 101)
+        for P0 in (0.1, 1.0, 10.0):
+            curves.append({"P0": P0, "phi": phis,
+                           "eta_corrected": np.array([cf.winding_eta(P0, f, lam, A) for f in phis]),
+                           "eta_paper": np.array([cf.winding_eta(P0, f, lam, A, corrected=False) for f in phis])})
+            for f in np.linspace(-0.4, 0.4, 5):
+                eta, _, m = force_control(q, solver, rod, P0, f)
+                ref = cf.winding_eta(P0, f, lam, A)
+                points.append({"P0": P0, "phi": f, "eta_simulated": eta, "eta_corrected": ref,
+                               "eta_paper": cf.winding_eta(P0, f, lam, A, corrected=False),
+                               "error": abs(eta - ref) / ref})
+    if p.png:
+        _plot(p.figure, curves, points, p.png)
+    return {"figure": p.figure, "curves": curves, "points": points,
+            "error": max(pt["error"] for pt in points)}
+
+
+def _with(p, **kw):
+    import copy
+    q = copy.copy(p)
+    for k, v in kw.items():
+        setattr(q, k, v)
+    return q
+
+
+def _plot(fig_no, curves, points, path):
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        print("helix_winding.py: matplotlib is not installed (pip install -e '.[plot]'); no PNG written",
+              file=sys.stderr)
+        return
+    fig, ax = plt.subplots(figsize=(7, 5))
+    for i, c in enumerate(curves):
+        col = f"C{i}"
+        if fig_no == 1:
+            label = rf"$\lambda={c['lam']}$"
+            ax.plot(c["eta"], c["P0_corrected"], "-", color=col, label=f"corrected, {label}")
+            ax.plot(c["eta"], c["P0_paper"], "--", color=col, label=f"paper Eq. 81, {label}")
+            pts = [pt for pt in points if pt["lam"] == c["lam"]]
+            ax.plot([pt["eta"] for pt in pts], [pt["P0_simulated"] for pt in pts], "o", color=col, mfc="none",
+                    label=f"simulated, {label}")
+        else:
+            label = rf"$P_0={c['P0']:g}$"
+            ax.plot(c["phi"], c["eta_corrected"], "-", color=col, label=f"corrected, {label}")
+            ax.plot(c["phi"], c["eta_paper"], "--", color=col, label=f"paper Eq. 81, {label}")
+            pts = [pt for pt in points if pt["P0"] == c["P0"]]
+            ax.plot([pt["phi"] for pt in pts], [pt["eta_simulated"] for pt in pts], "o", color=col, mfc="none",
+                    label=f"simulated, {label}")
+    if fig_no == 1:
+        ax.set(xlabel=r"axial elongation $\eta$", ylabel=r"$P_0 = P/(A_2\omega_0^2)$", ylim=(-2.5, 10),
+               title=r"Figure 1: $A = 0.67$, $\varphi = 0$")
+        ax.axhline(0, color="k", lw=0.5)
+    else:
+        ax.set(xlabel=r"overtwist $\varphi$", ylabel=r"axial elongation $\eta$",
+               title=r"Figure 2: $A = 0.67$, $\lambda = 0.6$")
+    ax.legend(fontsize=7, ncol=3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def run(p, solver):
+    if p.figure:
+        out = figure(p, solver, rest_rod)
+        out["reference"] = "corrected Eq. 81 (docs/derivations.md, Helix winding); worst simulated point"
+        return out
+    out = point(p, solver, rest_rod(p))
+    out["reference"] = ("corrected Eq. 81 and axial torque (docs/derivations.md, Helix winding)"
+                        if p.P0 is None else "eta from the corrected Eq. 81 (docs/derivations.md, Helix winding)")
+    return out
+
+
+def validate(p):
+    if p.A <= 0 or p.lam <= 0 or p.turns <= 0:
+        raise ValueError(f"--A, --lam and --turns must be > 0; got {p.A}, {p.lam}, {p.turns}")
+    if not 1 + p.phi > 0:
+        raise ValueError(f"--phi must be > -1 (1 + phi is the winding ratio); got {p.phi}")
+    em = float(cf.winding_eta_max(p.lam))
+    if p.P0 is None and not 0 < p.eta < em:
+        raise ValueError(f"--eta must be in (0, eta_max = sqrt(1 + 1/lam^2) = {em:.6g}); got {p.eta}")
+    if p.figure not in (0, 1, 2):
+        raise ValueError(f"--figure must be 1 or 2; got {p.figure}")
+    if p.png and not p.figure:
+        raise ValueError("--png needs --figure 1 or 2")
+    if p.n < 12 * p.turns:
+        raise ValueError(f"--n must be >= 12 per turn ({int(12 * p.turns)} for {p.turns} turns); got {p.n}")
+
+
+run.validate = validate
+
+if __name__ == "__main__":
+    sys.exit(scenario_main("helix_winding", __doc__.splitlines()[0], PARAMETERS, run, n_default=200))

@@ -29,6 +29,19 @@ def loop_fold(A1, a0):
     return A1 / a0 ** 2
 
 
+def loop_threshold(A1, A2, a0):
+    """(m_t, mode) where the planar loop stops being stable (linear stability with the follower load).
+
+    Fourier mode k >= 2 of the out-of-plane perturbation diverges when cos(alpha) = (A - k^2) / (A - 1), A = A1/A2;
+    mode 2 comes first and only for A > 4, at m_t a0^2 / A1 = sqrt(3 (2A - 5)) / (A - 1). For A <= 4 the planar
+    ring is stable up to the fold (mode 0, the uniform twist). No flutter. (docs/derivations.md, 6.1)
+    """
+    A = A1 / A2
+    if A <= 4.0:
+        return loop_fold(A1, a0), 0
+    return np.sqrt(3.0 * (2.0 * A - 5.0)) / (A - 1.0) * A1 / a0 ** 2, 2
+
+
 # ---------------------------------------------------------------------------------------------------------
 # 6.2 Torsion of a disconnected ring: arc of radius a0, length L, clamped at 0, torque T about t at L
 # Linear in T (dead and follower torques agree at this order). q = k (L - xi), p = k L, k = 1/a0.

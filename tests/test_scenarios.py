@@ -108,3 +108,19 @@ def test_loop_twist_past_the_fold_reports_no_equilibrium():
     out = run("loop_twist", 24, must_converge=False, mt=1.2, sweep=6)
     assert out["sweep"][-1]["converged"] is False
     assert "no equilibrium" in out["beyond"]
+
+
+def test_loop_twist_threshold_is_the_follower_load_bifurcation():
+    """A1/A2 = 5: bisection on the sign of the lowest eigenvalue gives sqrt(15)/4 (mode 2 with the follower
+    load; the conservative half-follower load would give 0.9612). Measured 1.2e-3 at n = 100, second order."""
+    out = run("loop_twist", 100, A2=0.2, mt=1.0, sweep=8, locate=1)
+    theory, mode = cf.loop_threshold(1.0, 0.2, 1.0)
+    assert mode == 2 and theory == pytest.approx(np.sqrt(15) / 4)
+    assert abs(out["threshold_mt"] - theory) < 2.5e-3 * theory
+    assert abs(out["threshold_mt"] - 0.9612) > 5e-3
+
+
+def test_loop_twist_dna_ratio_is_stable_up_to_the_fold():
+    out = run("loop_twist", 60, mt=0.98, sweep=7)
+    assert all(s["stable"] for s in out["sweep"]) and out["threshold_mt"] is None
+    assert cf.loop_threshold(1.0, 1 / 0.67, 1.0) == (1.0, 0)

@@ -130,9 +130,13 @@ def _verdict(sweep, fold):
     prev = None
     for s in sweep:
         if not s["converged"]:
-            out["beyond"] = (f"no equilibrium at m_t = {s['mt']:.6g} ({s['status']}): past the fold "
-                             f"m_t = A1/a0^2 = {fold:.6g} the cross-sections rotate without bound"
-                             if s["mt"] > fold else f"the solve failed at m_t = {s['mt']:.6g} ({s['status']})")
+            if s["mt"] > fold:
+                out["beyond"] = (f"no equilibrium at m_t = {s['mt']:.6g} ({s['status']}): past the fold "
+                                 f"m_t = A1/a0^2 = {fold:.6g} the cross-sections rotate without bound")
+            else:
+                out["beyond"] = (f"no equilibrium found at m_t = {s['mt']:.6g} ({s['status']}): the ring left the "
+                                 f"plane (out_of_plane = {s['out_of_plane']:.3g} a0) and the damped dynamics did "
+                                 "not settle within the limits")
             if out["threshold_mt"] is None and s["mt"] > fold:
                 out["threshold_mt"], out["threshold_kind"] = fold, "fold (no planar equilibrium beyond)"
             break

@@ -124,3 +124,20 @@ def test_loop_twist_dna_ratio_is_stable_up_to_the_fold():
     out = run("loop_twist", 60, mt=0.98, sweep=7)
     assert all(s["stable"] for s in out["sweep"]) and out["threshold_mt"] is None
     assert cf.loop_threshold(1.0, 1 / 0.67, 1.0) == (1.0, 0)
+
+
+def test_closed_forms_against_the_nonlinear_kirchhoff_bvp():
+    """The second method: tools/check_closed_forms.py --quick (solve_bvp on the full Kirchhoff rod) passes,
+    and the paper's formulas fail it."""
+    import json
+    import subprocess
+    import sys
+
+    tool = Path(__file__).resolve().parents[1] / "tools" / "check_closed_forms.py"
+    out = subprocess.run([sys.executable, str(tool), "--quick", "--json"], capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
+    report = json.loads(out.stdout.strip().splitlines()[-1])
+    assert report["ok"] and len(report["rows"]) >= 10
+    paper = [r["paper_err"] for r in report["rows"] if r["paper_err"] is not None]
+    assert paper and min(paper) > 0.1

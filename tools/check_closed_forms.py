@@ -274,7 +274,7 @@ def main():
         print(f"{case:58s} {q:9s} {e:10.2e} {TOL[sec]:7.0e} {'-' if ep is None else f'{ep:9.2e}':>9s}"
               f"{'' if good else '  FAIL'}")
     total = time.time() - t_start
-    print(f"times: " + ", ".join(f"{k} {v:.1f} s" for k, v in times.items()) + f"; total {total:.1f} s")
+    print("times: " + ", ".join(f"{k} {v:.1f} s" for k, v in times.items()) + f"; total {total:.1f} s")
     print("PASS: all corrected closed forms agree with the BVP" if ok else "FAIL: see rows marked FAIL")
     if args.json:
         print(json.dumps({"ok": bool(ok), "quick": args.quick, "seconds": round(total, 2), "tol": TOL,

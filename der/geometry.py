@@ -15,7 +15,7 @@ All angles are in radians, right-handed.
 import numpy as np
 from numba import njit
 
-from .stencils import edge_dofs, scatter_band
+from .stencils import edge_dofs, scatter_band, vangle, vdot, vec, vnorm, vscale, vsub, vtransport
 
 # ---------------------------------------------------------------------------------------------
 # small vector helpers (3-vectors as length-3 arrays)
@@ -188,25 +188,28 @@ def transport_frames(q, edge_nodes, vertex_edges, t_old, d1_old, twist_old, t_ne
     """
     n = edge_nodes.shape[0]
     for j in range(n):
-        e = edge_vector(q, edge_nodes, j)
-        le = norm3(e)
+        a = 4 * edge_nodes[j, 0]
+        b = 4 * edge_nodes[j, 1]
+        e = (q[b] - q[a], q[b + 1] - q[a + 1], q[b + 2] - q[a + 2])
+        le = vnorm(e)
         if not (le > 0.0) or not np.isfinite(le):
             return False
-        tj = e / le
-        if 1.0 + dot3(t_old[j], tj) < 1e-12:
+        tj = vscale(1.0 / le, e)
+        to = vec(t_old, j)
+        if 1.0 + vdot(to, tj) < 1e-12:
             return False
-        d = parallel_transport(d1_old[j], t_old[j], tj)
+        d = vtransport(vec(d1_old, j), to, tj)
         # re-orthonormalise against round-off drift
-        s = dot3(d, tj)
+        d = vsub(d, vscale(vdot(d, tj), tj))
+        d = vscale(1.0 / vnorm(d), d)
         for k in range(3):
-            d[k] -= s * tj[k]
-        d /= norm3(d)
-        t_new[j] = tj
-        d1_new[j] = d
+            t_new[j, k] = tj[k]
+            d1_new[j, k] = d[k]
     for v in range(vertex_edges.shape[0]):
         a = vertex_edges[v, 0]
         b = vertex_edges[v, 1]
-        ang = reference_twist_angle(t_new[a], d1_new[a], t_new[b], d1_new[b])
+        tb = vec(t_new, b)
+        ang = vangle(vtransport(vec(d1_new, a), vec(t_new, a), tb), vec(d1_new, b), tb)
         twist_new[v] = twist_old[v] + wrap_to_pi(ang - twist_old[v])
     return True
 

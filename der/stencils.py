@@ -46,6 +46,22 @@ def vnorm(a):
 
 
 @njit(cache=True, inline="always")
+def vtransport(u, t1, t2):
+    """Parallel transport of u from unit t1 to unit t2 (tuples; see geometry.parallel_transport)."""
+    b = vcross(t1, t2)
+    c = vdot(t1, t2)
+    bxu = vcross(b, u)
+    s = vdot(b, u) / (1.0 + c)
+    return (u[0] * c + bxu[0] + b[0] * s, u[1] * c + bxu[1] + b[1] * s, u[2] * c + bxu[2] + b[2] * s)
+
+
+@njit(cache=True, inline="always")
+def vangle(u, v, axis):
+    """Signed angle from u to v about unit axis (tuples), in (-pi, pi]."""
+    return np.arctan2(vdot(vcross(u, v), axis), vdot(u, v))
+
+
+@njit(cache=True, inline="always")
 def node(q, k):
     return (q[4 * k], q[4 * k + 1], q[4 * k + 2])
 

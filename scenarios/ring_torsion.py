@@ -27,15 +27,16 @@ PARAMETERS = [
     ("L", 3.0, float, "length of the arc (< 2 pi a0)"),
     ("T", 1e-3, float, "end torque about the end tangent (small: the closed form is linear in T)"),
     ("torque", "dead", str, "dead (fixed vector T t0(L)) or follower (T about the current end tangent)"),
+    ("symmetric", 0, int, "1: solve at +T and -T and compare the odd part (removes the O(T^2) error)"),
 ]
 
 
-def build(p):
-    rod = der.rod_from_shape(der.shapes.arc(p.a0, p.L, p.n), p.A1, p.A2)
+def build(p, sign=1.0):
+    rod = der.rod_from_shape(der.shapes.arc(p.a0, p.L, p.n), p.A1, p.A2, EA=getattr(p, "EA", None))
     if p.torque == "dead":
-        load = der.end_torque(p.T * cf.ring_end_basis(p.a0, p.L)[0])
+        load = der.end_torque(sign * p.T * cf.ring_end_basis(p.a0, p.L)[0])
     else:
-        load = der.end_torque(p.T, follower=True)
+        load = der.end_torque(sign * p.T, follower=True)
     return der.Scene(rod, loads=[load], constraints=[der.clamp("start")])
 
 
@@ -45,6 +46,12 @@ def run(p, solver):
     result = solver.solve(scene)
     prof = dg.profile(rod, result.state)
     disp, rot = dg.end_motion(rod, result.state)
+    if p.symmetric:
+        minus = solver.solve(build(p, -1.0)).state
+        prof_m = dg.profile(rod, minus)
+        disp_m, rot_m = dg.end_motion(rod, minus)
+        prof = {k: (prof[k] - prof_m[k]) / 2 if k != "xi" else prof[k] for k in prof}
+        disp, rot = (disp - disp_m) / 2, (rot - rot_m) / 2
     args = (p.A1, p.A2, p.a0, p.L, p.T)
     rot_ref = cf.ring_end_rotation(*args)
     disp_ref = cf.ring_end_displacement(*args)

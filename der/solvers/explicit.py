@@ -236,11 +236,16 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
             else:
                 since_best += 1
             if since_best * options.check_every >= max(STALL_STEPS, steps // 4) and strain <= strain_tol:
+                # no progress for a while: stop if that is the round-off floor; otherwise FIRE may just be slow
+                # (the step and time limits still apply)
                 evaluate_system(system, state, 2)
-                status, floor, message = floor_verdict(system, state, load_scales(system, state), residual,
-                                                       options.tol, f"no progress in {since_best * options.check_every}"
-                                                       " steps")
-                break
+                verdict, floor, msg = floor_verdict(system, state, load_scales(system, state), residual,
+                                                    options.tol, f"no progress in {since_best * options.check_every}"
+                                                    " steps")
+                if verdict == "converged":
+                    status, message = verdict, msg
+                    break
+                best, since_best = residual, 0
             if rod.inextensible and strain > strain_tol:
                 if residual <= max(options.tol, 0.1 * constraint_residual(system, state, scales)):
                     multiplier_update(system, state)

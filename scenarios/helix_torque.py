@@ -37,7 +37,8 @@ HEADLINE = ("Mn", "Mb", "Mt", "Ft", "Fb", "dalpha", "dkappa", "domega")
 
 
 def build(p, sign=1.0):
-    rod = der.rod_from_shape(der.shapes.helix(p.kappa0, p.omega0, 1.0, p.n), p.A1, p.A2)
+    rod = der.rod_from_shape(der.shapes.helix(p.kappa0, p.omega0, 1.0, p.n), p.A1, p.A2,
+                              EA=getattr(p, "EA", None))
     loads = [der.end_force(cf.helix_end_force(p.kappa0, p.omega0, sign * p.P)),
              der.end_torque(sign * p.T, follower=True)]
     return der.Scene(rod, loads=loads, constraints=[der.clamp("start")])

@@ -41,7 +41,7 @@ PARAMETERS = [
 
 
 def rest_rod(p):
-    return der.rod_from_shape(der.shapes.helix(1.0, p.lam, p.turns, p.n), p.A, 1.0)
+    return der.rod_from_shape(der.shapes.helix(1.0, p.lam, p.turns, p.n), p.A, 1.0, EA=getattr(p, "EA", None))
 
 
 def deformed_state(rod, eta, phi, lam):

@@ -65,7 +65,7 @@ def observe(rod, result, mt, p):
 
 
 def run(p, solver):
-    rod = der.rod_from_shape(der.shapes.ring(p.a0, p.n), p.A1, p.A2)
+    rod = der.rod_from_shape(der.shapes.ring(p.a0, p.n), p.A1, p.A2, EA=getattr(p, "EA", None))
     fold = cf.loop_fold(p.A1, p.a0)
     steps = np.linspace(p.mt / p.sweep, p.mt, p.sweep) if p.sweep else np.array([p.mt])
     state = rod.rest_state()

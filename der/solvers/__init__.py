@@ -93,4 +93,16 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
     return result
 
 
-__all__ = ["solve", "SolverOptions", "SolveResult", "ConvergenceError", "STATUSES", "SOLVERS"]
+def check_stability(scene, state, n_eigenvalues=6):
+    """Stability of ``state`` as an equilibrium of ``scene`` (it need not be one exactly): a SolveResult-like
+    record with ``min_eigenvalue``, ``eigenvalues``, ``stable``, ``flutter`` and ``stability_note``."""
+    from .stability import stability
+
+    system = build_system(scene, SolverOptions())
+    work = prepare_state(system, state)
+    result = SolveResult(state=work, converged=True, status="", residual=float("nan"), iterations=0,
+                         wall_time=0.0, message="stability of a given state")
+    return stability(system, result, n_eigenvalues)
+
+
+__all__ = ["solve", "check_stability", "SolverOptions", "SolveResult", "ConvergenceError", "STATUSES", "SOLVERS"]

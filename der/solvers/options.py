@@ -25,12 +25,16 @@ class SolverOptions:
     dt0, dt_max, dt_growth : implicit pseudo-time step (dimensionless: the damping matrix is the diagonal of
         the stiffness), its cap, and the largest growth per step. dt -> infinity is Newton's method.
     line_search_steps, armijo : backtracking halvings per pseudo-time step and the sufficient-decrease factor.
-    dt : explicit time step (physical time for the rod's line density rho_A); None picks ``safety`` times
-        the stable limit. A larger requested dt is refused with a ValueError.
+    dt : explicit time step (physical time for the rod's line density rho_A); None picks ``safety / omega_max``,
+        half the stability limit 2 / omega_max. A dt above the stability limit is refused with a ValueError.
     safety : fraction of the stable explicit step used.
     fire_* : FIRE parameters of the explicit solver (Bitzek et al. 2006).
     check_every : explicit steps between residual checks, progress and recording.
     inextensible_penalty : penalty c of the augmented Lagrangian, k_j = c A1 / l_j^3 (inextensible rods).
+    displacement_tol : explicit solver only: when its residual stalls at the round-off floor, the state counts as
+        converged if one Newton correction (not applied) would move it by less than this fraction of its
+        displacement -- the forces of its slowest modes are buried in round-off there, so the residual alone
+        cannot certify them.
     stability : compute the lowest eigenvalues of the constrained stiffness at the equilibrium.
     n_eigenvalues : how many of the lowest eigenvalues to report.
     progress : print progress to stderr (None: only for solves longer than 2 s).
@@ -56,6 +60,7 @@ class SolverOptions:
     fire_f_alpha: float = 0.99
     check_every: int = 200
     inextensible_penalty: float = 10.0
+    displacement_tol: float = 1e-6
     stability: bool = True
     n_eigenvalues: int = 6
     progress: bool | None = None
@@ -63,7 +68,8 @@ class SolverOptions:
 
     def __post_init__(self):
         positive = ("tol", "max_iterations", "max_steps", "time_budget", "dt0", "dt_max", "dt_growth", "safety",
-                    "check_every", "inextensible_penalty", "n_eigenvalues", "record_every", "fire_f_inc")
+                    "check_every", "inextensible_penalty", "n_eigenvalues", "record_every", "fire_f_inc",
+                    "displacement_tol")
         for f in fields(self):
             v = getattr(self, f.name)
             if f.name in positive and not (isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0

@@ -103,8 +103,10 @@ def build_system(scene, options):
             M_app = max(M_app, float(np.abs(load.torque) if load.follower else np.linalg.norm(load.torque)))
         elif isinstance(load, TwistingMoment):
             M_app = max(M_app, abs(load.density) * L)
-    return System(scene, rod, plan, fixed, ~fixed, kl, ku, perm, k, weights, is_theta, mass, F_app, M_app,
-                  np.zeros(n), np.zeros(n), new_band(n, kl, ku))
+    system = System(scene, rod, plan, fixed, ~fixed, kl, ku, perm, plan.k_stretch, weights, is_theta, mass, F_app,
+                    M_app, np.zeros(n), np.zeros(n), new_band(n, kl, ku))
+    system.k_initial = plan.k_stretch.copy()
+    return system
 
 
 def evaluate_system(system, state, order):
@@ -154,6 +156,40 @@ def residual_floor(system, state, scales):
     return np.finfo(float).eps * residual_norm(system, out, scales)
 
 
+def newton_error_estimate(system, state):
+    """Size of the Newton correction K^-1 R at ``state`` relative to the displacement from the rest shape
+    (max norm over node positions and, times the rod length, edge angles): an estimate of the error left,
+    dominated by the slowest modes. Rigid-body
+    and other symmetry modes of an unconstrained rod are projected out (they carry no error)."""
+    from ..linalg import add_diagonal, band_solve, constrain_band
+    from .stability import symmetry_modes
+
+    evaluate_system(system, state, 2)
+    R = residual_vector(system)
+    V = np.array(symmetry_modes(system, state)).T if symmetry_modes(system, state) else np.zeros((R.size, 0))
+    if V.shape[1]:
+        Q, _ = np.linalg.qr(V)
+        R = R - Q @ (Q.T @ R)
+    ab = system.ab.copy(order="F")
+    diag = np.abs(ab[system.kl + system.ku, :][system.perm])
+    diag[diag == 0] = 1.0
+    add_diagonal(ab, system.kl, system.ku, system.perm, diag, 1e-14)   # regularises the symmetry modes
+    constrain_band(ab, system.kl, system.ku, system.perm, system.fixed, 1.0)
+    delta, info = band_solve(ab, system.kl, system.ku, system.perm, R)
+    if info != 0 or not np.all(np.isfinite(delta)):
+        return np.inf
+    if V.shape[1]:
+        delta = delta - Q @ (Q.T @ delta)
+    # displacement and rotation (times the rod length) from the rest shape, against the same of the correction
+    rod = system.rod
+    L = rod.length
+    d = delta.reshape(-1, 4)
+    u = state.q.reshape(-1, 4) - rod.rest_q.reshape(-1, 4)
+    ne = rod.n_edges
+    scale = max(float(np.abs(u[:, :3]).max()), L * float(np.abs(u[:ne, 3]).max()), 1e-300)
+    return max(float(np.abs(d[:, :3]).max()), L * float(np.abs(d[:ne, 3]).max())) / scale
+
+
 FLOOR_FACTOR = 10.0
 
 
@@ -180,11 +216,28 @@ def constraint_residual(system, state, scales):
     return float(np.max(system.k_stretch * np.abs(g) / (scales[0] * rod.l_bar / rod.length)))
 
 
-def multiplier_update(system, state):
-    """Augmented-Lagrangian step for an inextensible rod: lam <- lam + k g."""
+PENALTY_GROWTH = 10.0
+PENALTY_MAX = 1e5      # times the initial penalty
+
+
+def multiplier_update(system, state, previous_strain=None):
+    """Augmented-Lagrangian step for an inextensible rod: lam <- lam + k g.
+
+    With ``previous_strain`` (the implicit solver, whose inner solves are exact), if the largest strain did not
+    fall at least fourfold since the previous update, the penalty k is raised
+    tenfold first (up to 1e5 times its start value): a rod whose shape is itself nearly inextensible -- a
+    straight rod under tension, a tight helix -- resists the multiplier update, and the usual remedy of the
+    method of multipliers is a larger penalty. Returns the strain the update was made at."""
     rod = system.rod
     g = elongations(state.q, rod.edge_nodes, rod.l_bar)
-    state.lam += system.k_stretch * g
+    strain = float(np.max(np.abs(g) / rod.l_bar))
+    k = system.plan.k_stretch
+    if previous_strain is not None and strain > 0.25 * previous_strain and \
+            k.max() * PENALTY_GROWTH <= PENALTY_MAX * system.k_initial.max():
+        k *= PENALTY_GROWTH           # in place: the plan and the state see it
+    state.lam += k * g
+    state.penalty = k.copy()
+    return strain
 
 
 def transport(system, base, q_new, out):

@@ -129,7 +129,7 @@ def test_scenario_not_converged_exits_3_with_json():
 def test_ctrl_c_leaves_a_valid_recording(tmp_path):
     path = tmp_path / "sigint.rrd"
     proc = subprocess.Popen([sys.executable, str(ROOT / "scenarios" / "straight_twist.py"), "--solver", "explicit",
-                             "--n", "400", "--tol", "1e-12", "--rrd", str(path), "--json"],
+                             "--n", "3000", "--tol", "1e-12", "--rrd", str(path), "--json"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
     deadline = time.time() + 120
     while time.time() < deadline and (not path.exists() or path.stat().st_size < 2000):

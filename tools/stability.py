@@ -287,7 +287,7 @@ def greenhill(budget, quick):
                                   [np.sin(1.2 * crit), np.cos(1.2 * crit), 0], [0, 0, 1.0]]))]),
         budget, state=kicked.state) if kicked.converged else kicked
     r2 = {"case": f"Greenhill: same, kicked out of the straight state, n = {n}", "solver": "implicit", "n": n,
-          **outcome(relaxed, None, None, "follows to a buckled (writhed) equilibrium")}
+          **outcome(relaxed, None, None, f"follows to a buckled (writhed) equilibrium, stable = {relaxed.stable}")}
     r2["lateral_deflection"] = float(np.abs(relaxed.state.positions[:, :2]).max())
     rows.append(r2)
     return rows
@@ -342,6 +342,11 @@ def main(argv=None):
         st = f"{r['solve_s']:.3f}" if isinstance(r.get("solve_s"), float) else "-"
         flag = "  <-- UNEXPLAINED" if r["unexplained"] else ""
         print(f"{r['group']:<10} {r['case'][:74]:<74} {r['outcome'][:34]:<34} {res:>9} {it:>8} {st:>8} {chk:>9}{flag}")
+        if not r.get("converged") or r.get("lateral_deflection") is not None:
+            why = r.get("note") or r.get("message") or ""
+            extra = f" lateral deflection {r['lateral_deflection']:.3g};" if r.get("lateral_deflection") is not None \
+                else ""
+            print(f"{'':<10}   ->{extra} {why[:160]}")
     counts = {}
     for r in rows:
         counts[r["outcome"]] = counts.get(r["outcome"], 0) + 1

@@ -209,7 +209,7 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
         while True:
             scales = load_scales(system, state)
             F_s, M_s = scales
-            inv_scale = 1.0 / (np.where(system.is_theta, M_s, F_s) * system.weights)
+            inv_scale = 1.0 / np.where(system.is_theta, M_s, F_s)
             if e_total is None:
                 e_total = evaluate_system(system, state, 1) + 0.5 * float(system.mass @ v ** 2) - work_done
             n = min(options.check_every, options.max_steps - steps)
@@ -285,10 +285,12 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
         state.copy_from(last_good)
         status, message = "interrupted", "interrupted by the user; last state kept"
     wall = time.perf_counter() - t_start
+    evaluate_system(system, state, 1)
+    per_length = residual_norm(system, residual_vector(system), load_scales(system, state), per_length=True)
     res = SolveResult(state=state, converged=status == "converged", status=status, residual=float(residual),
                       iterations=steps, wall_time=wall, message=message + f" ({rejected_total} steps rejected; "
                       f"stiffest mode: {stiffest}, dt_max {dt_max:.2e})", solver="explicit", strain=strain,
                       load_scale=float(load_scales(system, state)[0]), energy=energy_terms(system, state),
-                      history=history, dt=dt, residual_floor=float(floor))
+                      history=history, dt=dt, residual_floor=float(floor), residual_per_length=per_length)
     res.total_energy = energies
     return res

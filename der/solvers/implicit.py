@@ -141,7 +141,9 @@ def solve_implicit(system, state, options, progress=None, recorder=None):
         state.copy_from(last_good)
         status, message = "interrupted", "interrupted by the user; last state kept"
     wall = time.perf_counter() - t_start
+    evaluate_system(system, state, 1)
+    per_length = residual_norm(system, residual_vector(system), load_scales(system, state), per_length=True)
     return SolveResult(state=state, converged=status == "converged", status=status, residual=float(residual),
                        iterations=it, wall_time=wall, message=message, solver="implicit", strain=strain,
                        load_scale=float(load_scales(system, state)[0]), energy=energy_terms(system, state),
-                       history=history, dt=dt, residual_floor=float(floor))
+                       history=history, dt=dt, residual_floor=float(floor), residual_per_length=per_length)

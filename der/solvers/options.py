@@ -9,11 +9,11 @@ import numpy as np
 class SolverOptions:
     """All tolerances and limits of the solvers.
 
-    Convergence is declared when the residual -- the largest generalized force on a free DOF (node forces,
-    and moments on theta divided by the mean edge length so both are forces), relative to ``load_scale`` --
-    is below ``tol`` and, for an inextensible rod, the largest axial strain is below ``strain_tol``.
-    ``load_scale`` is the largest of: the applied loads, the reactions at the constraints and the internal
-    forces of the rod (all as node forces). It is reported with every result.
+    Convergence is declared when the residual -- the largest out-of-balance generalized force on a free DOF
+    (node forces relative to the force scale, moments on theta relative to the moment scale) -- is below
+    ``tol`` and, for an inextensible rod, the largest axial strain is below ``strain_tol``. The scales are the
+    largest applied, reaction or internal force (moment) in the rod (``der.solvers.system``); the force scale
+    is reported with every result as ``load_scale``.
 
     Attributes
     ----------
@@ -107,6 +107,8 @@ class SolveResult:
     converged, status, message : whether and why the solve stopped (``STATUSES``).
     residual : final residual (dimensionless, relative to ``load_scale``); strain : largest |axial strain|.
     residual_floor : round-off floor of the residual, when it was estimated (NaN otherwise).
+    residual_per_length : the same imbalance per unit length (see ``der.solvers.system``), n times the residual
+        for a uniform rod: the measure a solution error scales with.
     iterations : pseudo-time steps (implicit) or time steps (explicit); wall_time : seconds (after compilation).
     load_scale : the force scale of the residual.
     min_eigenvalue, stable, eigenvalues : stability at the equilibrium (None if not computed); eigenvalues are
@@ -136,6 +138,7 @@ class SolveResult:
     history: list = field(default_factory=list)
     dt: float | None = None
     residual_floor: float = float("nan")
+    residual_per_length: float = float("nan")
 
 
 class ConvergenceError(RuntimeError):

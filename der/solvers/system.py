@@ -1,18 +1,20 @@
 """What both solvers share: the scene flattened into work arrays, residual and load scale, frame transport,
 the inextensibility multiplier update, and energy by term.
 
-Residual (dimensionless): the largest out-of-balance generalized force on a free DOF, per unit length,
-relative to the load scale per unit length:
+Residual (dimensionless): the largest out-of-balance generalized force on a free DOF -- a node force, or a
+moment about the tangent on an edge angle -- relative to the load scale:
 
-    residual = max_i |R_i| / (w_i S_i / L)
+    residual = max_i |R_i| / S_i
 
-with ``R = f_ext - dE/dq``, ``w_i`` the rest length a DOF stands for (a node's Voronoi length, an edge's
-length), ``S_i`` the force scale ``F_s`` for node DOFs and the moment scale ``M_s`` for theta DOFs, and L the
-rod length. ``F_s`` (``M_s``) is the largest applied force (moment) -- point loads, distributed loads times
-L -- or internal force (moment) anywhere along the rod, which includes the reactions at the constraints, and at
-least the other scale converted over the rod length (M_s / L, F_s L).
-Measured this way a tolerance means the same thing at every n: a residual ``r`` perturbs the solution like a
-spurious distributed load of relative size ``r``.
+with ``R = f_ext - dE/dq`` and ``S_i`` the force scale ``F_s`` for node DOFs, the moment scale ``M_s`` for theta
+DOFs. ``F_s`` (``M_s``) is the largest applied force (moment) -- point loads, distributed loads times L -- or
+internal force (moment) anywhere along the rod, which includes the reactions at the constraints, and at least
+the other scale converted over the rod length L (M_s / L, F_s L).
+
+The same imbalance per unit length (``residual_per_length``: each R_i divided by the length w_i its DOF stands
+for, against S_i / L) is n times larger for a uniform rod; it is what a solution error scales with (a residual
+acts like a spurious distributed load of that relative size). Newton's quadratic convergence usually takes both
+far below the tolerance in its last step; both are reported.
 """
 from dataclasses import dataclass
 
@@ -140,9 +142,12 @@ def residual_vector(system):
     return R
 
 
-def residual_norm(system, R, scales):
+def residual_norm(system, R, scales, per_length=False):
+    """max_i |R_i| / S_i (the convergence measure), or per unit length with ``per_length``."""
     F_s, M_s = scales
-    s = np.where(system.is_theta, M_s, F_s) * system.weights
+    s = np.where(system.is_theta, M_s, F_s)
+    if per_length:
+        s = s * system.weights
     return float(np.max(np.abs(R) / s)) if R.size else 0.0
 
 

@@ -46,7 +46,7 @@ def solve_implicit(system, state, options, progress=None, recorder=None):
     residual = floor = np.inf
     strain = 0.0
     best, since_best = np.inf, 0
-    last_update_strain = None
+    last_update = None
     just_updated = False
     descent = total_descent = 0.0
     ab_K = np.empty_like(system.ab)
@@ -85,8 +85,8 @@ def solve_implicit(system, state, options, progress=None, recorder=None):
                 if residual <= max(options.tol, 0.1 * constraint_residual(system, state, scales)):
                     # near equilibrium a strain that will not fall calls for a larger penalty (see
                     # multiplier_update); during a transient it only means the rod is still moving
-                    last_update_strain = multiplier_update(system, state,
-                                                           last_update_strain if residual < 1e-4 else None)
+                    last_update = multiplier_update(system, state,
+                                                           last_update if residual < 1e-4 else None)
                     best, since_best = np.inf, 0
                     just_updated = True   # let Newton answer before the next update
                     continue

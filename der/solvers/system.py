@@ -215,34 +215,37 @@ def max_strain(system, state):
 
 
 def constraint_residual(system, state, scales):
-    """The elongation left in an inextensible rod as a residual: max_j k_j |g_j| / (F_s l_j / L)."""
+    """The elongation left in an inextensible rod as a residual (same units as ``residual_norm``): the force
+    k_j |g_j| a multiplier update would shift, relative to the force scale."""
     rod = system.rod
     g = elongations(state.q, rod.edge_nodes, rod.l_bar)
-    return float(np.max(system.k_stretch * np.abs(g) / (scales[0] * rod.l_bar / rod.length)))
+    return float(np.max(system.k_stretch * np.abs(g)) / scales[0])
 
 
 PENALTY_GROWTH = 10.0
 PENALTY_MAX = 1e5      # times the initial penalty
 
 
-def multiplier_update(system, state, previous_strain=None):
-    """Augmented-Lagrangian step for an inextensible rod: lam <- lam + k g.
+def multiplier_update(system, state, previous=None):
+    """Augmented-Lagrangian step for an inextensible rod: lam <- lam + k g. Returns the elongations g it used.
 
-    With ``previous_strain`` (the implicit solver, whose inner solves are exact), if the largest strain did not
-    fall at least fourfold since the previous update, the penalty k is raised
-    tenfold first (up to 1e5 times its start value): a rod whose shape is itself nearly inextensible -- a
-    straight rod under tension, a tight helix -- resists the multiplier update, and the usual remedy of the
-    method of multipliers is a larger penalty. Returns the strain the update was made at."""
+    With ``previous`` (the elongations of the previous update; the implicit solver passes them only near
+    equilibrium, where its inner solves are exact): if the elongation did not fall at least fourfold along itself
+    since then, the penalty k is raised tenfold first (up to 1e5 times its start value). A rod whose shape is
+    itself nearly inextensible -- a straight rod under tension, a tight helix -- resists the multiplier update,
+    and the remedy of the method of multipliers is a larger penalty. An elongation that changed sign means the
+    update overshot: then the penalty is left alone."""
     rod = system.rod
     g = elongations(state.q, rod.edge_nodes, rod.l_bar)
-    strain = float(np.max(np.abs(g) / rod.l_bar))
     k = system.plan.k_stretch
-    if previous_strain is not None and strain > 0.25 * previous_strain and \
-            k.max() * PENALTY_GROWTH <= PENALTY_MAX * system.k_initial.max():
-        k *= PENALTY_GROWTH           # in place: the plan and the state see it
+    if previous is not None:
+        gg = float(previous @ previous)
+        ratio = float(g @ previous) / gg if gg > 0 else 0.0
+        if ratio > 0.25 and k.max() * PENALTY_GROWTH <= PENALTY_MAX * system.k_initial.max():
+            k *= PENALTY_GROWTH           # in place: the plan and the state see it
     state.lam += k * g
     state.penalty = k.copy()
-    return strain
+    return g
 
 
 def transport(system, base, q_new, out):

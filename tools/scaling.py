@@ -1,0 +1,177 @@
+"""Time to equilibrium and peak memory of the implicit solver from n = 100 to 100,000 edges.
+
+    python tools/scaling.py [--json] [--n 100 1000 10000 100000] [--png PATH]
+
+Two problems: ring torsion (scenarios/ring_torsion.py: an arc clamped at one end, end torque; solved from the
+rest state) and helix winding (scenarios/helix_winding.py: 200 edges per turn, so n/200 turns, both ends clamped
+on the stretched and overwound helix; solved from the uniform helix). Each (problem, n) runs in a fresh process
+(numba's cache makes that cheap) so that its peak resident memory is its own: reported is the growth of the
+peak RSS over the process baseline after compilation, and the peak of Python/NumPy allocations (tracemalloc).
+Reported per run: iterations, solve time, time per iteration, residual, error against the closed form. Fitted:
+the exponent p of time per iteration ~ n^p and of memory ~ n^p over the converged runs with n >= 1000.
+
+Limit: the Newton matrix of a rod in node positions has a condition number growing like n^4 (edge bending
+stiffness ~ 1/h^3 against the softest global mode ~ h / L^4). Ring torsion is a global, soft-mode response: past
+n ~ 30,000 (L = 3 a0) double precision cannot resolve it and the solve ends at its 120 s budget, which the
+table reports. Helix winding (each turn resolved by 200 edges, the response local to a turn) is not limited.
+"""
+import argparse
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, ".."))
+
+
+def single(problem, n):
+    """One run in this process; returns a dict (called in a child process)."""
+    import tracemalloc
+
+    import der
+
+    compile_s = der.warmup()
+    base_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    t0 = time.perf_counter()
+    scene, state, error = _problem(problem, n)
+    setup_s = time.perf_counter() - t0
+    res = der.solve(scene, state=state, stability=False, raise_on_failure=False,
+                    options=der.SolverOptions(time_budget=120.0))
+    peak_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    # NumPy's share of the peak, in a second, short solve: tracemalloc slows allocation-heavy code, so it is
+    # kept out of the timed run (the work arrays are all allocated in the first iterations)
+    tracemalloc.start()
+    der.solve(scene, state=state, stability=False, raise_on_failure=False,
+              options=der.SolverOptions(max_iterations=3))
+    _, traced_peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    return {"problem": problem, "n": n, "converged": res.converged, "status": res.status,
+            "iterations": res.iterations, "solve_s": res.wall_time, "setup_s": setup_s,
+            "s_per_iteration": res.wall_time / max(res.iterations, 1), "residual": res.residual,
+            "message": res.message, "error": error(res.state), "rss_growth_mb": (peak_rss - base_rss) / 1024.0,
+            "traced_peak_mb": traced_peak / 2 ** 20, "compile_s": compile_s}
+
+
+def _problem(problem, n):
+    """(scene, initial state or None, error(state) against the closed form) of one benchmark problem."""
+    import importlib.util
+
+    import der
+    from der import closed_forms as cf
+    from der import diagnostics as dg
+
+    if problem == "ring_torsion":
+        A1, A2, a0, L, T = 1.0, 1.0 / 0.67, 1.0, 3.0, 1e-3
+        rod = der.rod_from_shape(der.shapes.arc(a0, L, n), A1, A2)
+        scene = der.Scene(rod, loads=[der.end_torque(T * cf.ring_end_basis(a0, L)[0])],
+                          constraints=[der.clamp("start")])
+        ref = cf.ring_end_rotation(A1, A2, a0, L, T)
+
+        def error(state):
+            return float(np.linalg.norm(dg.end_motion(rod, state)[1] - ref) / np.linalg.norm(ref))
+        return scene, None, error
+    spec = importlib.util.spec_from_file_location("hw", os.path.join(HERE, "..", "scenarios", "helix_winding.py"))
+    hw = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hw)
+    lam, eta, phi, A = 0.6, 1.2, 0.1, 0.67
+    rod = der.rod_from_shape(der.shapes.helix(1.0, lam, n / 200, n), A, 1.0)
+    scene = der.Scene(rod, constraints=[der.clamp("start"), der.clamp("end")])
+    ref = np.array([cf.winding_P0(eta, phi, lam, A), cf.winding_T0(eta, phi, lam, A)])
+
+    def error(state):
+        m = hw.measure(rod, state, lam)
+        return float(np.linalg.norm(np.array([m["P0"], m["T0"]]) - ref) / np.linalg.norm(ref))
+    return scene, hw.deformed_state(rod, eta, phi, lam), error
+
+
+def fit(rows, key):
+    pts = [(r["n"], r[key]) for r in rows if r["n"] >= 1000 and r.get("converged") and r.get(key) and r[key] > 0]
+    if len(pts) < 2:
+        return None
+    x, y = np.log([p[0] for p in pts]), np.log([p[1] for p in pts])
+    return float(np.polyfit(x, y, 1)[0])
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, nargs="+", default=[100, 300, 1000, 3000, 10000, 30000, 100000])
+    ap.add_argument("--problems", nargs="+", default=["ring_torsion", "helix_winding"])
+    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--png", default=None)
+    ap.add_argument("--single", nargs=2, metavar=("PROBLEM", "N"), help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.single:
+        print(json.dumps(single(args.single[0], int(args.single[1]))))
+        return
+    rows = []
+    for problem in args.problems:
+        for n in args.n:
+            out = subprocess.run([sys.executable, __file__, "--single", problem, str(n)], capture_output=True,
+                                 text=True)
+            try:
+                r = json.loads(out.stdout.strip().splitlines()[-1])
+            except (ValueError, IndexError):
+                r = {"problem": problem, "n": n, "converged": False, "status": "crashed",
+                     "message": out.stderr.strip()[-300:]}
+            rows.append(r)
+            print(f"[scaling] {problem} n={n}: {r.get('status')} {r.get('solve_s', float('nan')):.3f} s",
+                  file=sys.stderr)
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores (one used)")
+    print(f"{'problem':<14} {'n':>7} {'iter':>5} {'solve s':>9} {'s/iter':>9} {'residual':>9} {'error':>9} "
+          f"{'RSS MB':>8} {'numpy MB':>9}  status")
+    for r in rows:
+        if "solve_s" not in r:
+            print(f"{r['problem']:<14} {r['n']:>7}  {r['status']}: {r['message']}")
+            continue
+        print(f"{r['problem']:<14} {r['n']:>7} {r['iterations']:>5} {r['solve_s']:>9.3f} {r['s_per_iteration']:>9.4f} "
+              f"{r['residual']:>9.1e} {r['error']:>9.1e} {r['rss_growth_mb']:>8.1f} {r['traced_peak_mb']:>9.1f}  "
+              f"{r['status']}")
+    fits = {}
+    for problem in args.problems:
+        pr = [r for r in rows if r["problem"] == problem and "solve_s" in r]
+        fits[problem] = {"time_per_iteration_exponent": fit(pr, "s_per_iteration"),
+                         "solve_time_exponent": fit(pr, "solve_s"),
+                         "memory_exponent": fit(pr, "traced_peak_mb")}
+        print(f"{problem}: time/iteration ~ n^{fits[problem]['time_per_iteration_exponent']:.2f}, "
+              f"solve time ~ n^{fits[problem]['solve_time_exponent']:.2f}, "
+              f"memory ~ n^{fits[problem]['memory_exponent']:.2f}  (fits over n >= 1000)")
+    if args.png:
+        _plot(rows, args.png)
+    if args.json:
+        print(json.dumps({"machine": platform.machine(), "rows": rows, "fits": fits}))
+
+
+def _plot(rows, path):
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        print("scaling.py: matplotlib is not installed (pip install -e '.[plot]'); no PNG", file=sys.stderr)
+        return
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for i, problem in enumerate(sorted({r["problem"] for r in rows})):
+        pr = [r for r in rows if r["problem"] == problem and "solve_s" in r]
+        ns = [r["n"] for r in pr]
+        axes[0].loglog(ns, [r["solve_s"] for r in pr], "o-", color=f"C{i}", label=f"{problem}: solve")
+        axes[0].loglog(ns, [r["s_per_iteration"] for r in pr], "s--", color=f"C{i}", label=f"{problem}: per iteration")
+        axes[1].loglog(ns, [max(r["traced_peak_mb"], 1e-3) for r in pr], "o-", color=f"C{i}", label=problem)
+    ns = np.array([100, 100000])
+    axes[0].loglog(ns, 1e-5 * ns, "k:", lw=0.8, label="~ n")
+    axes[0].set(xlabel="edges n", ylabel="seconds", title="implicit solver: time to equilibrium")
+    axes[1].set(xlabel="edges n", ylabel="MB (NumPy peak during the solve)", title="memory")
+    for ax in axes:
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+if __name__ == "__main__":
+    main()

@@ -29,6 +29,12 @@ def loop_fold(A1, a0):
     return A1 / a0 ** 2
 
 
+def michell_twist(A1, A2):
+    """Michell's threshold (1889; Zajac 1962): a naturally straight rod closed into a planar ring with total
+    twist Tw (radians, uniform) stays a stable planar ring while Tw < 2 pi sqrt(3) A1 / A2."""
+    return 2.0 * np.pi * np.sqrt(3.0) * A1 / A2
+
+
 def loop_threshold(A1, A2, a0):
     """(m_t, mode) where the planar loop stops being stable (linear stability with the follower load).
 

@@ -7,7 +7,9 @@ Entities (timeline ``iteration``):
   twist (blue negative, white zero, red positive);
 * ``rod/m1``: the material director m1 on (up to ``max_arrows``) edges;
 * ``rod/start_frame``, ``rod/end_frame``: t, m1, m2 of the end edges (red, green, blue);
-* ``energy/<term>`` and ``residual`` (log10): time series.
+* ``energy/<term>`` and ``residual`` (log10): time series;
+* ``ring/linking_number``, ``ring/twist``, ``ring/writhe`` (turns): time series, for rings of up to 2,000 edges
+  (the writhe costs O(n^2)).
 
 Replay with ``rerun file.rrd``. rerun stores float32: positions read back agree to ~1e-7 relative.
 """
@@ -17,6 +19,8 @@ import numpy as np
 
 from . import diagnostics as dg
 from .geometry import material_frames, tangents
+
+WRITHE_MAX_EDGES = 2000
 
 
 def _diverging(values, scale):
@@ -96,6 +100,10 @@ class Recorder:
             rec.log(f"energy/{term}", rr.Scalars(float(value)))
         if np.isfinite(residual) and residual > 0:
             rec.log("residual", rr.Scalars(float(np.log10(residual))))
+        if rod.closed and rod.n_edges <= WRITHE_MAX_EDGES:
+            lk, tw, wr = dg.linking_number(rod, state)
+            for name, value in (("linking_number", lk), ("twist", tw), ("writhe", wr)):
+                rec.log(f"ring/{name}", rr.Scalars(float(value)))
 
     def log_final(self, result):
         rr = self.rr
@@ -141,3 +149,19 @@ def read_centrelines(path):
             out.append((it, pts))
     out.sort(key=lambda p: p[0])
     return [p[0] for p in out], [p[1] for p in out]
+
+
+def read_scalars(path, entity):
+    """(iterations, values) of a scalar time series in a recording, e.g. ``ring/linking_number`` (float64)."""
+    from rerun.chunk import RrdReader
+
+    out = []
+    for chunk in RrdReader(path).stream().to_chunks():
+        if chunk.entity_path != "/" + entity.strip("/"):
+            continue
+        rb = chunk.to_record_batch()
+        its = rb.column("iteration").to_pylist()
+        for it, v in zip(its, rb.column("Scalars:scalars").to_pylist()):
+            out.append((it, float(v[0])))
+    out.sort(key=lambda p: p[0])
+    return [p[0] for p in out], np.array([p[1] for p in out])

@@ -41,6 +41,10 @@ class Rod:
     rest_twist : (n_vertices,) rest reference twist.
     rho_A, rho_J : float
         Line density and rotational inertia per length used by the dynamics (they do not change equilibria).
+    imposed_twist : float
+        Ring only: the rotation (radians, right-handed about the tangent) with which its ends were welded
+        (``with_imposed_twist``): at the wrap vertex 0 the first edge's material frame, continued from the
+        last edge, is turned by it (``weld``), in the twisting and the bending energy alike.
     """
 
     closed: bool
@@ -59,6 +63,16 @@ class Rod:
     rest_twist: np.ndarray
     rho_A: float = 1.0
     rho_J: float | None = None
+    imposed_twist: float = 0.0
+
+    @property
+    def weld(self):
+        """Per vertex: the turn of edge f's material frame as seen from edge e (radians); nonzero only at
+        vertex 0 of a ring welded with ``imposed_twist``."""
+        w = np.zeros(self.vertex_nodes.shape[0])
+        if self.closed:
+            w[0] = self.imposed_twist
+        return w
 
     @property
     def n_edges(self):
@@ -131,6 +145,49 @@ class Rod:
         t = tangents(self.rest_q, self.edge_nodes)
         return RodState(self.rest_q.copy(), self.rest_d1.copy(), t, self.rest_twist.copy(),
                         np.zeros(self.n_edges))
+
+    def with_natural(self, kappa_bar=None, twist_bar=None):
+        """A copy with other natural integrated curvatures (n_vertices, 2) and/or twists (n_vertices,), same
+        shape: e.g. ``kappa_bar=0`` for a naturally straight rod bent into the shape."""
+        kb = self.kappa_bar if kappa_bar is None else np.broadcast_to(np.asarray(kappa_bar, float),
+                                                                     self.kappa_bar.shape).copy()
+        tb = self.twist_bar if twist_bar is None else np.broadcast_to(np.asarray(twist_bar, float),
+                                                                     self.twist_bar.shape).copy()
+        if not (np.all(np.isfinite(kb)) and np.all(np.isfinite(tb))):
+            raise ValueError("natural curvatures and twists must be finite")
+        return replace(self, kappa_bar=kb, twist_bar=tb)
+
+    def with_imposed_twist(self, twist):
+        """A ring whose ends were welded after a rotation by ``twist`` radians about the tangent (extra
+        linking number twist / 2 pi; any real value, e.g. to sweep through Michell's threshold).
+
+        The weld sits at vertex 0 (between the last edge and the first): there the first edge's material
+        frame, continued from the last edge, is turned by ``twist`` (``weld``). Once the edge angles relax, a
+        naturally straight ring carries the uniform twist ``twist / L``. Calling it again replaces the weld.
+        """
+        if not self.closed:
+            raise ValueError("with_imposed_twist: an imposed twist needs a closed ring (the rod is open); "
+                             "twist an open rod with an end torque or a clamp rotation instead")
+        twist = float(twist)
+        if not np.isfinite(twist):
+            raise ValueError(f"with_imposed_twist: twist must be finite; got {twist}")
+        return replace(self, imposed_twist=twist)
+
+    def displaced(self, state, dx=None, dtheta=None):
+        """A copy of ``state`` with its nodes moved by ``dx`` (n_nodes, 3) and its edge angles turned by
+        ``dtheta`` (n_edges,) [radians], reference frames parallel-transported along the straight path (so
+        the reference twist stays continuous: windings and a ring's linking number are kept)."""
+        from .geometry import transport_frames
+
+        out = state.copy()
+        if dx is not None:
+            out.positions[:] += np.asarray(dx, float).reshape(self.n_nodes, 3)
+        if dtheta is not None:
+            out.theta[:] += np.asarray(dtheta, float)
+        if not transport_frames(out.q, self.edge_nodes, self.vertex_edges, state.tangents, state.d1,
+                                state.reference_twist, out.tangents, out.d1, out.reference_twist):
+            raise ValueError("displaced: the displacement reverses or collapses an edge; use a smaller one")
+        return out
 
     def with_stiffness(self, A1=None, A2=None, EA=...):
         """A copy with other stiffnesses (same shape and rest state)."""
@@ -323,7 +380,9 @@ def rod_from_shape(shape, A1, A2, EA=None, rho_A=1.0, rho_J=None):
     q.reshape(-1, 4)[:, :3] = x
     rest_twist = np.array([reference_twist_angle(t[a], d1[a], t[b], d1[b]) for a, b in vertex_edges])
     ed = edge_frames(q, edge_nodes, d1)
-    kappa_bar = np.array([material_curvature(ed, vertex_edges, v) for v in range(vertex_nodes.shape[0])]).reshape(-1, 2)
+    no_weld = np.zeros(vertex_nodes.shape[0])
+    kappa_bar = np.array([material_curvature(ed, vertex_edges, no_weld, v)
+                          for v in range(vertex_nodes.shape[0])]).reshape(-1, 2)
     voronoi = 0.5 * (le[vertex_edges[:, 0]] + le[vertex_edges[:, 1]])
     return Rod(closed=closed, A1=float(A1), A2=float(A2), EA=None if EA is None else float(EA),
                edge_nodes=edge_nodes, vertex_nodes=vertex_nodes, vertex_edges=vertex_edges,

@@ -103,7 +103,7 @@ def _check_load(rod, load):
 Plan = namedtuple("Plan", [
     "has_stretch", "has_bend", "has_twist",
     "edge_nodes", "vertex_nodes", "vertex_edges",
-    "l_bar", "voronoi", "kappa_bar", "twist_bar", "A1", "A2", "k_stretch",
+    "l_bar", "voronoi", "kappa_bar", "twist_bar", "weld", "A1", "A2", "k_stretch",
     "has_nodal", "nodal_forces", "has_theta", "theta_moments",
     "has_dead_torques", "torque_edges", "torque_vectors",
     "counters",
@@ -144,7 +144,7 @@ def make_plan(scene, k_stretch):
     return Plan(
         "stretch" in scene.energies, "bend" in scene.energies, "twist" in scene.energies,
         rod.edge_nodes, rod.vertex_nodes, rod.vertex_edges,
-        rod.l_bar, rod.voronoi, rod.kappa_bar, rod.twist_bar, rod.A1, rod.A2,
+        rod.l_bar, rod.voronoi, rod.kappa_bar, rod.twist_bar, rod.weld, rod.A1, rod.A2,
         np.array(k_stretch, dtype=float),        # a copy: the solver may raise the penalty in place
         has_nodal, nodal, has_theta, theta,
         len(t_edges) > 0, np.array(t_edges, dtype=np.int64), np.array(t_vecs, dtype=float).reshape(-1, 3),
@@ -179,23 +179,24 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
     if plan.has_bend:
         plan.counters[1] += 1
         if order >= 2:
-            energy += bend_hessian(ed, plan.vertex_nodes, plan.vertex_edges, plan.kappa_bar, plan.voronoi,
-                                   plan.A1, grad, ab, kl, ku, perm)
+            energy += bend_hessian(ed, plan.vertex_nodes, plan.vertex_edges, plan.weld, plan.kappa_bar,
+                                   plan.voronoi, plan.A1, grad, ab, kl, ku, perm)
         elif order == 1:
-            energy += bend_gradient(ed, plan.vertex_nodes, plan.vertex_edges, plan.kappa_bar, plan.voronoi,
-                                    plan.A1, grad)
+            energy += bend_gradient(ed, plan.vertex_nodes, plan.vertex_edges, plan.weld, plan.kappa_bar,
+                                    plan.voronoi, plan.A1, grad)
         else:
-            energy += bend_energy(ed, plan.vertex_edges, plan.kappa_bar, plan.voronoi, plan.A1)
+            energy += bend_energy(ed, plan.vertex_edges, plan.weld, plan.kappa_bar, plan.voronoi, plan.A1)
     if plan.has_twist:
         plan.counters[2] += 1
         if order >= 2:
-            energy += twist_hessian(q, ed, plan.vertex_nodes, plan.vertex_edges, reference_twist, plan.twist_bar,
-                                    plan.voronoi, plan.A2, grad, ab, kl, ku, perm)
+            energy += twist_hessian(q, ed, plan.vertex_nodes, plan.vertex_edges, reference_twist, plan.weld,
+                                    plan.twist_bar, plan.voronoi, plan.A2, grad, ab, kl, ku, perm)
         elif order == 1:
-            energy += twist_gradient(q, ed, plan.vertex_nodes, plan.vertex_edges, reference_twist, plan.twist_bar,
-                                     plan.voronoi, plan.A2, grad)
+            energy += twist_gradient(q, ed, plan.vertex_nodes, plan.vertex_edges, reference_twist, plan.weld,
+                                     plan.twist_bar, plan.voronoi, plan.A2, grad)
         else:
-            energy += twist_energy(q, plan.vertex_edges, reference_twist, plan.twist_bar, plan.voronoi, plan.A2)
+            energy += twist_energy(q, plan.vertex_edges, reference_twist, plan.weld, plan.twist_bar, plan.voronoi,
+                                   plan.A2)
     if order >= 2 and (plan.has_bend or plan.has_twist):
         plan.counters[3] += 1
         n_edges = plan.edge_nodes.shape[0]

@@ -168,13 +168,10 @@ def _with(p, **kw):
 
 
 def _plot(fig_no, curves, points, path):
-    try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        print("helix_winding.py: matplotlib is not installed (pip install -e '.[plot]'); no PNG written",
-              file=sys.stderr)
+    from der.plotting import pyplot
+
+    plt = pyplot("helix_winding.py")
+    if plt is None:
         return
     fig, ax = plt.subplots(figsize=(7, 5))
     for i, c in enumerate(curves):

@@ -19,7 +19,6 @@ import der
 from der import closed_forms as cf
 from der import diagnostics as dg
 from der.cli import scenario_main
-from der.geometry import transport_frames
 
 PARAMETERS = [
     ("A1", 1.0, float, "bending stiffness"),
@@ -38,12 +37,9 @@ def perturbed(rod, state, eps, a0):
         return state
     x0 = rod.rest_q.reshape(-1, 4)[:, :3]
     phi = np.arctan2(x0[:, 1], x0[:, 0])
-    out = state.copy()
-    out.positions[:, 2] += eps * a0 * 0.5 * (np.cos(2 * phi) + np.sin(3 * phi))
-    ok = transport_frames(out.q, rod.edge_nodes, rod.vertex_edges, state.tangents, state.d1, state.reference_twist,
-                          out.tangents, out.d1, out.reference_twist)
-    assert ok
-    return out
+    dx = np.zeros_like(x0)
+    dx[:, 2] = eps * a0 * 0.5 * (np.cos(2 * phi) + np.sin(3 * phi))
+    return rod.displaced(state, dx)
 
 
 def observe(rod, result, mt, p):

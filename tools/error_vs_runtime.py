@@ -234,12 +234,10 @@ def main(argv=None):
 
 
 def _plot(results, path):
-    try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        print("error_vs_runtime.py: matplotlib is not installed (pip install -e '.[plot]'); no PNG", file=sys.stderr)
+    from der.plotting import pyplot
+
+    plt = pyplot("error_vs_runtime.py")
+    if plt is None:
         return
     fig, ax = plt.subplots(figsize=(7, 5))
     keys = sorted({(r["scenario"], r["solver"]) for r in results})

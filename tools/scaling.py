@@ -148,12 +148,10 @@ def main(argv=None):
 
 
 def _plot(rows, path):
-    try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        print("scaling.py: matplotlib is not installed (pip install -e '.[plot]'); no PNG", file=sys.stderr)
+    from der.plotting import pyplot
+
+    plt = pyplot("scaling.py")
+    if plt is None:
         return
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     for i, problem in enumerate(sorted({r["problem"] for r in rows})):

@@ -6,7 +6,8 @@ Per vertex ``v`` joining edges ``e`` and ``f`` (Bergou et al. 2010; material fra
     kappa1 = 1/2 kb . (m2_e + m2_f),  kappa2 = -1/2 kb . (m1_e + m1_f)
     E_v    = A1 / (2 D_v) [(kappa1 - kappa1_bar)^2 + (kappa2 - kappa2_bar)^2]
 
-with ``D_v`` the rest Voronoi length (half the two rest edge lengths). With the rest material frame on the
+with ``D_v`` the rest Voronoi length (half the two rest edge lengths); at the weld vertex of a welded ring edge
+f's frame is first turned by the weld rotation (see ``energies.twist``). With the rest material frame on the
 Frenet frame, ``kappa_bar = (kappa0 D, 0)`` and, writing ``m1 = cos(alpha) n + sin(alpha) b``, the
 continuum limit is the paper's bending term ``A1/2 (kappa^2 - 2 kappa kappa0 cos(alpha) + kappa0^2)`` (Eq. 17).
 ``kappa1, kappa2`` are integrated (dimensionless) curvatures; energies are in units of A1 / length.
@@ -21,22 +22,33 @@ from ..stencils import (
 
 
 @njit(cache=True)
-def material_curvature(ed, vertex_edges, v):
+def welded(m1, m2, psi):
+    """The frame (m1, m2) turned by psi about the tangent (a weld; identity for psi = 0)."""
+    if psi == 0.0:
+        return m1, m2
+    c, s = np.cos(psi), np.sin(psi)
+    return vadd(vscale(c, m1), vscale(s, m2)), vsub(vscale(c, m2), vscale(s, m1))
+
+
+@njit(cache=True)
+def material_curvature(ed, vertex_edges, weld, v):
     """Integrated material curvatures (kappa1, kappa2) at vertex v; ``ed`` from ``geometry.edge_frames``."""
     te, _, m1e, m2e = edge_vectors(ed, vertex_edges[v, 0])
     tf, _, m1f, m2f = edge_vectors(ed, vertex_edges[v, 1])
+    m1f, m2f = welded(m1f, m2f, weld[v])
     kb = vscale(2.0 / (1.0 + vdot(te, tf)), vcross(te, tf))
     return 0.5 * vdot(kb, vadd(m2e, m2f)), -0.5 * vdot(kb, vadd(m1e, m1f))
 
 
 @njit(cache=True)
-def _bend_local(ed, vertex_edges, v, kbar1, kbar2, stiff, order, g8, H8, work):
+def _bend_local(ed, vertex_edges, weld, v, kbar1, kbar2, stiff, order, g8, H8, work):
     """Energy of vertex v; with order >= 1 its gradient in (e, f, theta_e, theta_f), order >= 2 the Hessian.
 
     ``ed`` holds the per-edge tangents, lengths and material frames (``geometry.edge_frames``); ``work`` is a
     (5, 8) scratch buffer, so nothing is allocated per vertex."""
     te, le, m1e, m2e = edge_vectors(ed, vertex_edges[v, 0])
     tf, lf, m1f, m2f = edge_vectors(ed, vertex_edges[v, 1])
+    m1f, m2f = welded(m1f, m2f, weld[v])   # d/dtheta_f is unchanged: m1f' = m2f, m2f' = -m1f
     chi = 1.0 + vdot(te, tf)
     kb = vscale(2.0 / chi, vcross(te, tf))
     k1 = 0.5 * vdot(kb, vadd(m2e, m2f))
@@ -146,27 +158,27 @@ def _bend_local(ed, vertex_edges, v, kbar1, kbar2, stiff, order, g8, H8, work):
 
 
 @njit(cache=True)
-def bend_energy(ed, vertex_edges, kappa_bar, voronoi, A1):
+def bend_energy(ed, vertex_edges, weld, kappa_bar, voronoi, A1):
     """Total bending energy; ``ed = geometry.edge_frames(q, edge_nodes, d1)``."""
     g8 = np.empty(8)
     H8 = np.empty((8, 8))
     work = np.empty((5, 8))
     total = 0.0
     for v in range(vertex_edges.shape[0]):
-        total += _bend_local(ed, vertex_edges, v, kappa_bar[v, 0], kappa_bar[v, 1], A1 / voronoi[v], 0, g8, H8,
+        total += _bend_local(ed, vertex_edges, weld, v, kappa_bar[v, 0], kappa_bar[v, 1], A1 / voronoi[v], 0, g8, H8,
                              work)
     return total
 
 
 @njit(cache=True)
-def bend_gradient(ed, vertex_nodes, vertex_edges, kappa_bar, voronoi, A1, grad):
+def bend_gradient(ed, vertex_nodes, vertex_edges, weld, kappa_bar, voronoi, A1, grad):
     """Add the bending energy gradient to ``grad`` (length n_dof); returns the energy."""
     g8 = np.empty(8)
     H8 = np.empty((8, 8))
     work = np.empty((5, 8))
     total = 0.0
     for v in range(vertex_edges.shape[0]):
-        total += _bend_local(ed, vertex_edges, v, kappa_bar[v, 0], kappa_bar[v, 1], A1 / voronoi[v], 1, g8, H8,
+        total += _bend_local(ed, vertex_edges, weld, v, kappa_bar[v, 0], kappa_bar[v, 1], A1 / voronoi[v], 1, g8, H8,
                              work)
         scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
                                 vertex_edges[v, 0], vertex_edges[v, 1], g8)
@@ -174,7 +186,7 @@ def bend_gradient(ed, vertex_nodes, vertex_edges, kappa_bar, voronoi, A1, grad):
 
 
 @njit(cache=True)
-def bend_hessian(ed, vertex_nodes, vertex_edges, kappa_bar, voronoi, A1, grad, ab, kl, ku, perm):
+def bend_hessian(ed, vertex_nodes, vertex_edges, weld, kappa_bar, voronoi, A1, grad, ab, kl, ku, perm):
     """Add gradient to ``grad`` and Hessian to the band matrix ``ab``; returns the energy."""
     g8 = np.empty(8)
     H8 = np.empty((8, 8))
@@ -183,7 +195,7 @@ def bend_hessian(ed, vertex_nodes, vertex_edges, kappa_bar, voronoi, A1, grad, a
     dofs = np.empty(11, dtype=np.int64)
     total = 0.0
     for v in range(vertex_edges.shape[0]):
-        total += _bend_local(ed, vertex_edges, v, kappa_bar[v, 0], kappa_bar[v, 1], A1 / voronoi[v], 2, g8, H8,
+        total += _bend_local(ed, vertex_edges, weld, v, kappa_bar[v, 0], kappa_bar[v, 1], A1 / voronoi[v], 2, g8, H8,
                              work)
         scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
                                 vertex_edges[v, 0], vertex_edges[v, 1], g8)

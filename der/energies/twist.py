@@ -9,6 +9,10 @@ Per vertex ``v`` joining edges ``e`` and ``f``:
 discrete Frenet twist (``omega0 D`` in the continuum) and ``m = (alpha' + omega) D``, so the continuum limit is
 the paper's twisting term ``A2/2 (alpha' + omega - omega0)^2`` (Eq. 17). The reference twist depends on the
 centreline through the parallel-transported reference frames: ``dm/de = kb / (2|e|)``, ``dm/df = kb / (2|f|)``.
+
+``weld`` (per vertex, radians; ``Rod.weld``) is zero except at vertex 0 of a ring welded with a twist: there
+edge f's material frame, continued from edge e, is turned by the weld rotation, ``m_v = theta_f + weld_v -
+theta_e + reference_twist_v``. The bending kernel turns that frame by the same angle.
 """
 import numpy as np
 from numba import njit
@@ -20,16 +24,16 @@ from ..stencils import (
 
 
 @njit(cache=True)
-def material_twist(q, vertex_edges, reference_twist, v):
-    """Integrated material twist m_v (radians) at vertex v."""
-    return q[4 * vertex_edges[v, 1] + 3] - q[4 * vertex_edges[v, 0] + 3] + reference_twist[v]
+def material_twist(q, vertex_edges, reference_twist, weld, v):
+    """Integrated material twist m_v (radians) at vertex v (``weld``: see the module docstring)."""
+    return q[4 * vertex_edges[v, 1] + 3] - q[4 * vertex_edges[v, 0] + 3] + reference_twist[v] + weld[v]
 
 
 @njit(cache=True)
-def _twist_local(q, ed, vertex_edges, reference_twist, v, mbar, stiff, order, g8, H8, work):
+def _twist_local(q, ed, vertex_edges, reference_twist, weld, v, mbar, stiff, order, g8, H8, work):
     """Energy of vertex v; with order >= 1 its gradient in (e, f, theta_e, theta_f), order >= 2 the Hessian.
     ``ed`` from ``geometry.edge_frames`` (only its tangents and lengths are used)."""
-    m = material_twist(q, vertex_edges, reference_twist, v)
+    m = material_twist(q, vertex_edges, reference_twist, weld, v)
     r = m - mbar
     energy = 0.5 * stiff * r * r
     if order == 0:
@@ -67,24 +71,24 @@ def _twist_local(q, ed, vertex_edges, reference_twist, v, mbar, stiff, order, g8
 
 
 @njit(cache=True)
-def twist_energy(q, vertex_edges, reference_twist, twist_bar, voronoi, A2):
+def twist_energy(q, vertex_edges, reference_twist, weld, twist_bar, voronoi, A2):
     """Total twisting energy (it depends on the centreline only through the reference twist)."""
     total = 0.0
     for v in range(vertex_edges.shape[0]):
-        r = material_twist(q, vertex_edges, reference_twist, v) - twist_bar[v]
+        r = material_twist(q, vertex_edges, reference_twist, weld, v) - twist_bar[v]
         total += 0.5 * A2 / voronoi[v] * r * r
     return total
 
 
 @njit(cache=True)
-def twist_gradient(q, ed, vertex_nodes, vertex_edges, reference_twist, twist_bar, voronoi, A2, grad):
+def twist_gradient(q, ed, vertex_nodes, vertex_edges, reference_twist, weld, twist_bar, voronoi, A2, grad):
     """Add the twisting energy gradient to ``grad``; returns the energy. ``ed = geometry.edge_frames(...)``."""
     g8 = np.empty(8)
     H8 = np.empty((8, 8))
     work = np.empty((5, 8))
     total = 0.0
     for v in range(vertex_edges.shape[0]):
-        total += _twist_local(q, ed, vertex_edges, reference_twist, v, twist_bar[v], A2 / voronoi[v], 1, g8, H8,
+        total += _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v], A2 / voronoi[v], 1, g8, H8,
                               work)
         scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
                                 vertex_edges[v, 0], vertex_edges[v, 1], g8)
@@ -92,8 +96,8 @@ def twist_gradient(q, ed, vertex_nodes, vertex_edges, reference_twist, twist_bar
 
 
 @njit(cache=True)
-def twist_hessian(q, ed, vertex_nodes, vertex_edges, reference_twist, twist_bar, voronoi, A2, grad, ab, kl, ku,
-                  perm):
+def twist_hessian(q, ed, vertex_nodes, vertex_edges, reference_twist, weld, twist_bar, voronoi, A2, grad, ab,
+                  kl, ku, perm):
     """Add gradient to ``grad`` and Hessian to the band matrix ``ab``; returns the energy."""
     g8 = np.empty(8)
     H8 = np.empty((8, 8))
@@ -102,7 +106,7 @@ def twist_hessian(q, ed, vertex_nodes, vertex_edges, reference_twist, twist_bar,
     dofs = np.empty(11, dtype=np.int64)
     total = 0.0
     for v in range(vertex_edges.shape[0]):
-        total += _twist_local(q, ed, vertex_edges, reference_twist, v, twist_bar[v], A2 / voronoi[v], 2, g8, H8,
+        total += _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v], A2 / voronoi[v], 2, g8, H8,
                               work)
         scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
                                 vertex_edges[v, 0], vertex_edges[v, 1], g8)

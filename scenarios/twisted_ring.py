@@ -1,0 +1,236 @@
+"""Twisted ring: a closed rod welded with extra twist, Michell's instability, and writhe.
+
+A ring of length L = 2 pi a0 (a regular polygon of n edges on the circle of radius a0) with natural curvature
+kappa0 (``--kappa0 0``: a naturally straight rod closed into a ring; the default 1/a0: a naturally circular
+rod, the paper's) and natural twist 0, whose ends were welded after a rotation by ``--twist`` radians about
+the tangent: the extra linking number is twist / 2 pi. The twist is spread uniformly over the edge angles at
+the start and the ring relaxed. Reported: Tw (total material twist, turns), Wr (writhe, turns, the Gauss
+integral of the centreline polygon), Lk = Tw + Wr (must stay twist / 2 pi to round-off), how far the ring left
+its plane, and the stability of the equilibrium.
+
+Naturally straight ring: the planar ring with uniform twist is an equilibrium for every twist and stable up
+to Michell's threshold twist = 2 pi sqrt(3) A1 / A2 (Michell 1889, Zajac 1962). ``--sweep K`` continues from
+twist / K to twist in K steps, locates the sign change of the lowest stiffness eigenvalue and bisects it
+(``--locate 1``, default) to 1e-5. With ``--perturb EPS`` every step starts from the previous state bent out
+of plane by EPS a0, so that past the threshold the ring writhes (Tw turns into Wr at constant Lk).
+
+Naturally curved ring: twisting the cross-section away from the ring's normal costs bending energy (the
+paper's term -2 A1 kappa kappa0 cos(alpha), Eq. 17), so the weld's twist stays near the weld instead of
+spreading, the ring leaves the plane at once, and the sweep finds where that branch stops being stable.
+
+    python scenarios/twisted_ring.py [--A1 1] [--A2 1.4925] [--a0 1] [--kappa0 1/a0] [--twist RAD]
+                                     [--sweep K] [--perturb EPS] [--locate 1] [--png PATH]
+"""
+import sys
+
+import numpy as np
+
+import der
+from der import closed_forms as cf
+from der import diagnostics as dg
+from der.cli import scenario_main
+
+PARAMETERS = [
+    ("A1", 1.0, float, "bending stiffness"),
+    ("A2", 1.0 / 0.67, float, "twisting stiffness (A1/A2 = 0.67, DNA)"),
+    ("a0", 1.0, float, "radius of the ring (L = 2 pi a0)"),
+    ("kappa0", None, float, "natural curvature: 0 (naturally straight) or 1/a0 (naturally circular, default)"),
+    ("twist", None, float, "imposed twist in radians, the weld rotation (extra linking number x 2 pi); default: "
+     "1.5 x Michell's threshold for kappa0 = 0, 1.5 pi (Lk = 3/4) otherwise"),
+    ("sweep", 0, int, "continuation from twist/K to twist in this many steps (0: a single solve)"),
+    ("perturb", 0.0, float, "out-of-plane perturbation (fraction of a0) applied at the start of every step"),
+    ("locate", 1, int, "1: bisect the stability threshold found by the sweep; 0: interpolate it"),
+    ("png", None, str, "write a picture of the final ring (with --sweep: four states along it) to this PNG"),
+]
+
+LOCATE_TOL = 1e-5
+
+
+def make_rod(p):
+    """The ring rod of the parameters, without the weld (``with_imposed_twist`` adds it)."""
+    rod = der.rod_from_shape(der.shapes.ring(p.a0, p.n), p.A1, p.A2)
+    kappa0 = 1.0 / p.a0 if p.kappa0 is None else p.kappa0
+    # the rest polygon's integrated curvature, rescaled: natural curvature kappa0 on the same Frenet frame
+    return rod.with_natural(kappa_bar=rod.kappa_bar * (kappa0 * p.a0)), kappa0
+
+
+def start_state(rod, state, twist_from, twist_to, eps, a0):
+    """``state`` (welded with ``twist_from``) with the extra twist spread uniformly over the edge angles and
+    bent out of plane by eps a0 (cos 2 phi + sin 3 phi) / 2."""
+    n = rod.n_edges
+    dtheta = (twist_to - twist_from) * np.arange(n) / n
+    dx = None
+    if eps:
+        x0 = rod.rest_q.reshape(-1, 4)[:, :3]
+        phi = np.arctan2(x0[:, 1], x0[:, 0])
+        dx = np.zeros_like(x0)
+        dx[:, 2] = eps * a0 * 0.5 * (np.cos(2 * phi) + np.sin(3 * phi))
+    return rod.displaced(state, dx, dtheta)
+
+
+def observe(rod, result, twist, p):
+    st = result.state
+    lk, tw, wr = dg.linking_number(rod, st)
+    x = st.positions
+    c = x - x.mean(axis=0)
+    normal = np.linalg.svd(c, full_matrices=False)[2][-1]
+    strain = dg.material_twist_density(rod, st) - rod.twist_bar / rod.voronoi
+    return {
+        "twist": twist, "converged": result.converged, "status": result.status,
+        "twist_total": tw, "writhe": wr, "linking_number": lk, "lk_error": abs(lk - twist / (2 * np.pi)),
+        "out_of_plane": float(np.abs(c @ normal).max() / p.a0),
+        "twist_strain_spread": float((strain.max() - strain.min()) * p.a0),
+        "energy": float(sum(result.energy.values())) if result.energy else None,
+        "min_eigenvalue": result.min_eigenvalue, "stable": result.stable,
+    }
+
+
+def default_twist(p):
+    kappa0 = 1.0 / p.a0 if p.kappa0 is None else p.kappa0
+    return 1.5 * cf.michell_twist(p.A1, p.A2) if kappa0 == 0.0 else 1.5 * np.pi
+
+
+def run(p, solver):
+    base, kappa0 = make_rod(p)
+    if p.twist is None:
+        p.twist = default_twist(p)
+    steps = np.linspace(p.twist / p.sweep, p.twist, p.sweep) if p.sweep else np.array([p.twist])
+    state, welded = base.rest_state(), 0.0
+    sweep, states = [], []
+    for twist in steps:
+        rod = base.with_imposed_twist(twist)
+        scene = der.Scene(rod)
+        result = solver.solve(scene, state=start_state(rod, state, welded, twist, p.perturb, p.a0))
+        sweep.append(observe(rod, result, float(twist), p))
+        states.append(result.state)
+        if not result.converged:
+            break
+        state, welded = result.state, float(twist)
+    last = sweep[-1]
+    out = {k: last[k] for k in ("twist_total", "writhe", "linking_number", "lk_error", "out_of_plane",
+                                "twist_strain_spread", "min_eigenvalue", "stable")}
+    out["kappa0"] = kappa0
+    out["lk_error_max"] = max(s["lk_error"] for s in sweep)
+    michell = cf.michell_twist(p.A1, p.A2)
+    out["michell_twist"] = michell
+    out.update(_threshold(p, solver, base, sweep, states))
+    # der has no self-contact: a writhing ring can pass through itself, which changes Lk by 2
+    passages = [s for s in sweep if s["lk_error"] > 0.5]
+    out["strand_passage_at"] = passages[0]["twist"] if passages else None
+    if passages:
+        jump = passages[0]["linking_number"] - passages[0]["twist"] / (2 * np.pi)
+        out["note"] = (f"the ring passed through itself at twist {passages[0]['twist']:.6g} (Lk changed by "
+                       f"{jump:+.3g}): der has no self-contact, so states beyond that are not those of a real rod")
+    if passages:
+        out["error"] = out["lk_error_max"]
+        out["reference"] = "conservation of the linking number, Lk = twist / 2 pi (absolute error, turns)"
+    elif kappa0 == 0.0 and out["threshold_twist"] is not None:
+        out["error"] = abs(out["threshold_twist"] - michell) / michell
+        out["reference"] = "Michell's threshold twist 2 pi sqrt(3) A1/A2 (relative error of the located one)"
+    elif kappa0 == 0.0 and last["out_of_plane"] < 1e-8:
+        # planar branch: the twist is uniform, Tw = twist / 2 pi, Wr = 0
+        out["error"] = abs(last["twist_total"] - p.twist / (2 * np.pi)) / abs(p.twist / (2 * np.pi))
+        out["reference"] = "planar ring with uniform twist: Tw = twist / 2 pi (relative error)"
+    else:
+        out["error"] = out["lk_error_max"]
+        out["reference"] = "conservation of the linking number, Lk = twist / 2 pi (absolute error, turns)"
+    if p.sweep:
+        out["sweep"] = sweep
+        out["converged"] = all(s["converged"] for s in sweep)
+    if p.png:
+        picks = [k for k, s in enumerate(sweep) if s["converged"] and s["lk_error"] < 0.5]
+        picks = [picks[i] for i in sorted({round(x) for x in np.linspace(0, len(picks) - 1, 4)})] if picks else []
+        _picture(base, [(sweep[k], states[k]) for k in picks or [len(sweep) - 1]], kappa0, p)
+    return out
+
+
+def _picture(base, items, kappa0, p):
+    """Rings drawn in 3-D, each coloured by its twist strain, titled with Lk, Tw and Wr."""
+    from der.plotting import pyplot
+
+    plt = pyplot("twisted_ring.py")
+    if plt is None:
+        return
+    fig = plt.figure(figsize=(3.0 * len(items), 3.4))
+    scale = max(float(np.abs(dg.material_twist_density(base.with_imposed_twist(o["twist"]), st)).max())
+                for o, st in items) * p.a0
+    for i, (obs, state) in enumerate(items):
+        rod = base.with_imposed_twist(obs["twist"])
+        x = state.positions
+        x = np.vstack([x, x[:1]])
+        strain = dg.material_twist_density(rod, state) * p.a0   # twist per length, in 1/a0 (natural twist 0)
+        ax = fig.add_subplot(1, len(items), i + 1, projection="3d")
+        c = plt.cm.coolwarm(0.5 + 0.5 * np.clip(strain / max(scale, 1e-12), -1, 1))
+        for j in range(rod.n_edges):
+            ax.plot(x[j:j + 2, 0], x[j:j + 2, 1], x[j:j + 2, 2], color=c[j], lw=2.5)
+        lim = 1.0 * p.a0
+        ax.set(xlim=(-lim, lim), ylim=(-lim, lim), zlim=(-lim, lim))
+        ax.set_box_aspect((1, 1, 1), zoom=1.3)
+        ax.set_axis_off()
+        ax.view_init(elev=25, azim=-60)
+        ax.set_title(f"Lk = {obs['linking_number']:.3f}\nTw = {obs['twist_total']:.3f}, "
+                     f"Wr = {obs['writhe']:.3f}", fontsize=9)
+    fig.suptitle(f"twisted ring, kappa0 a0 = {kappa0 * p.a0:g}, A1/A2 = {p.A1 / p.A2:.3g}, n = {p.n}; colour: "
+                 f"material twist, blue -{scale:.2g} to red +{scale:.2g} per a0", fontsize=9)
+    fig.subplots_adjust(left=0, right=1, bottom=0, top=0.82, wspace=0)
+    fig.savefig(p.png, dpi=110)
+
+
+def _threshold(p, solver, base, sweep, states):
+    """The first loss of stability along the sweep: interpolated, then (``--locate``) bisected."""
+    out = {"threshold_twist": None, "threshold_located_by": None}
+    for k, s in enumerate(sweep):
+        if s["stable"] is not False:
+            continue
+        if k == 0 or sweep[k - 1]["min_eigenvalue"] is None:
+            out["threshold_twist"] = s["twist"] if k == 0 else None
+            out["threshold_located_by"] = "first sweep step already unstable" if k == 0 else None
+            return out
+        a, b = sweep[k - 1]["min_eigenvalue"], s["min_eigenvalue"]
+        lo, hi = sweep[k - 1]["twist"], s["twist"]
+        out["threshold_twist"] = lo + (hi - lo) * a / (a - b)
+        out["threshold_located_by"] = "linear interpolation of the lowest eigenvalue between two sweep steps"
+        if p.locate:
+            out["threshold_twist"] = _bisect(p, solver, base, states[k - 1], lo, hi)
+            out["threshold_located_by"] = (f"bisection on the sign of the lowest eigenvalue along the branch "
+                                           f"(relative width {LOCATE_TOL:g})")
+        return out
+    return out
+
+
+def _bisect(p, solver, base, state, lo, hi):
+    """Bisection on the twist for the sign change of the lowest eigenvalue, continuing from the stable side."""
+    welded = lo
+    while hi - lo > LOCATE_TOL * abs(hi):
+        mid = 0.5 * (lo + hi)
+        rod = base.with_imposed_twist(mid)
+        result = solver.solve(der.Scene(rod), state=start_state(rod, state, welded, mid, 0.0, p.a0))
+        if not result.converged:
+            raise RuntimeError(f"bisection solve failed at twist = {mid}: {result.message}")
+        if result.stable:
+            lo, state, welded = mid, result.state, mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def validate(p):
+    for name in ("A1", "A2", "a0"):
+        if getattr(p, name) <= 0:
+            raise ValueError(f"--{name} must be > 0; got {getattr(p, name)}")
+    if p.kappa0 is not None and p.kappa0 < 0:
+        raise ValueError(f"--kappa0 must be >= 0 (0: naturally straight, 1/a0: naturally circular); got {p.kappa0}")
+    if p.sweep < 0:
+        raise ValueError(f"--sweep must be >= 0; got {p.sweep}")
+    if p.twist is not None and p.twist == 0 and p.sweep:
+        raise ValueError("--twist must be non-zero for a sweep (it is the end point)")
+    if not 0 <= p.perturb < 0.5:
+        raise ValueError(f"--perturb must be in [0, 0.5) (a fraction of a0); got {p.perturb}")
+    if p.locate not in (0, 1):
+        raise ValueError(f"--locate must be 0 or 1; got {p.locate}")
+
+
+run.validate = validate
+
+if __name__ == "__main__":
+    sys.exit(scenario_main("twisted_ring", __doc__.splitlines()[0], PARAMETERS, run, n_default=200, n_min=6))

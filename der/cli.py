@@ -95,7 +95,7 @@ def _jsonable(value):
     return value
 
 
-def scenario_main(name, description, parameters, run, n_default=100, n_min=2, argv=None, human=None):
+def scenario_main(name, description, parameters, run, n_default=100, n_min=2, argv=None, human=None, tol_default=1e-8):
     """Run a scenario script. ``parameters``: list of (name, default, type, help)."""
     parser = _Parser(prog=f"{name}.py", description=description)
     for pname, default, ptype, phelp in parameters:
@@ -103,7 +103,8 @@ def scenario_main(name, description, parameters, run, n_default=100, n_min=2, ar
     parser.add_argument("--n", type=int, default=n_default, help=f"number of edges (default: {n_default})")
     parser.add_argument("--solver", choices=_solvers.SOLVERS, default="implicit",
                         help="implicit (default) or explicit damped dynamics")
-    parser.add_argument("--tol", type=float, default=1e-8, help="residual tolerance (default: 1e-8)")
+    parser.add_argument("--tol", type=float, default=tol_default,
+                        help=f"residual tolerance, per node (default: {tol_default:g})")
     parser.add_argument("--max-iterations", type=int, default=None,
                         help="iteration limit of the implicit solver (explicit: x1000 steps); default: the solver's")
     parser.add_argument("--rrd", default=None, help="write a rerun recording (.rrd) to this path")

@@ -87,13 +87,24 @@ def measure(mod, n, solver, repeat, budget, **params):
     return r
 
 
-def fitted_order(rows):
+def asymptotic(rows):
+    """The converged runs up to the last one whose error still falls with n: past it a floor (round-off of a
+    lightly loaded fine rod, or the linearisation of the closed form) dominates, which is no convergence order."""
     ok = [r for r in rows if r["converged"] and r["error"]]
+    for k in range(1, len(ok)):
+        if ok[k]["error"] >= ok[k - 1]["error"]:
+            return ok[:k], ok[k:]
+    return ok, []
+
+
+def fitted_order(rows):
+    """(order, first n, last n) of error ~ n^-order over the asymptotic runs, or (None, None, None)."""
+    ok, _ = asymptotic(rows)
     if len(ok) < 3:
-        return None
+        return None, None, None
     ns = np.array([r["n"] for r in ok], float)
     errs = np.array([r["error"] for r in ok])
-    return float(-np.polyfit(np.log(ns), np.log(errs), 1)[0])
+    return float(-np.polyfit(np.log(ns), np.log(errs), 1)[0]), ok[0]["n"], ok[-1]["n"]
 
 
 def time_to_reach(rows, target):
@@ -109,7 +120,13 @@ def time_to_reach(rows, target):
     unfinished = [r for r in rows if not r["converged"]]
     if unfinished:
         return None, f"not reached: n = {unfinished[0]['n']} did not finish ({unfinished[0]['status']})"
-    return None, f"not reached: error {ok[-1]['error']:.1e} at the largest n = {ok[-1]['n']}" if ok else "no runs"
+    if not ok:
+        return None, "no runs"
+    best = min(ok, key=lambda r: r["error"])
+    if best is not ok[-1]:
+        return None, (f"not reached: floor {best['error']:.1e} at n = {best['n']}, error rising to "
+                      f"{ok[-1]['error']:.1e} at n = {ok[-1]['n']} (see error sources)")
+    return None, f"not reached: error {ok[-1]['error']:.1e} at the largest n = {ok[-1]['n']}"
 
 
 def primary(name, out):
@@ -191,7 +208,9 @@ def main(argv=None):
                 if not r["converged"]:
                     stop = f"n = {n} did not finish: {r['status']}"
             results += rows
-            row = {"scenario": name, "solver": solver, "order": fitted_order(rows), "reference": note}
+            order, n_first, n_last = fitted_order(rows)
+            row = {"scenario": name, "solver": solver, "order": order, "order_n_range": [n_first, n_last],
+                   "reference": note}
             for target in TARGETS:
                 t, why = time_to_reach(rows, target)
                 row[f"time_to_{target:.0e}"] = t if t is not None else why
@@ -206,12 +225,13 @@ def main(argv=None):
         rt = f"{r['runtime_s']:.4f}" if r["runtime_s"] is not None else "-"
         print(f"{r['scenario']:<14} {r['solver']:<9} {r['n']:>5} {err:>10} {rt:>11} {str(r['iterations']):>11}  "
               f"{r['status']}")
-    print(f"\n{'scenario':<14} {'solver':<9} {'order':>6}   time to 1e-3 / 1e-4 / 1e-6")
+    print(f"\n{'scenario':<14} {'solver':<9} {'order':>6}  {'fitted over':<16} time to 1e-3 / 1e-4 / 1e-6")
     for s in summary:
         times = [s[f"time_to_{t:.0e}"] for t in TARGETS]
         shown = [f"{t:.3g} s" if isinstance(t, float) else t for t in times]
         order = f"{s['order']:.2f}" if s["order"] is not None else "-"
-        print(f"{s['scenario']:<14} {s['solver']:<9} {order:>6}   " + " / ".join(shown))
+        span = "n = {} ... {}".format(*s["order_n_range"]) if s["order"] is not None else ""
+        print(f"{s['scenario']:<14} {s['solver']:<9} {order:>6}  {span:<16} " + " / ".join(shown))
     for name, src in sources.items():
         print(f"\nerror sources, {name} (relative change of its measured quantity, implicit, n = {src['n']}):")
         for k, v in src.items():

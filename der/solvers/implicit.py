@@ -25,10 +25,13 @@ from ..linalg import add_diagonal, band_solve, constrain_band
 from .options import SolveResult
 from .system import (
     constraint_residual, energy_terms, evaluate_system, floor_verdict, load_scales, max_strain, multiplier_update,
-    residual_norm, residual_vector, transport,
+    residual_floor, residual_norm, residual_vector, transport,
 )
 
 STALL_ITERATIONS = 6
+# pseudo-time step reductions (x0.1 each) before a step is declared impossible: enough to go from Newton's
+# method (dt up to 1e30) down to a step that only damps (dt ~ 1e-10); 12 near the round-off floor
+MAX_SHRINKS = 40
 
 
 def solve_implicit(system, state, options, progress=None, recorder=None):
@@ -102,7 +105,9 @@ def solve_implicit(system, state, options, progress=None, recorder=None):
             diag[diag == 0] = 1.0
             fext = system.fext.copy()
             accepted = False
-            for _attempt in range(12):
+            for _attempt in range(MAX_SHRINKS):
+                if _attempt == 12 and residual < 100.0 * residual_floor(system, state, scales):
+                    break   # near the round-off floor a step that lowers the energy may not exist
                 work[:] = ab_K
                 add_diagonal(work, kl, ku, perm, diag, 1.0 / dt)
                 constrain_band(work, kl, ku, perm, system.fixed, 1.0)

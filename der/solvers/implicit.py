@@ -8,9 +8,10 @@ Each step solves, on the banded force Jacobian K (energy Hessian + frame-transpo
 
 with D = diag(|K|) (a dimensionless pseudo-time: the damping of every DOF scaled to its stiffness), then
 backtracks along delta until the work-corrected energy ``E(q + a delta) - a f_ext(q) . delta`` decreases
-(Armijo). dt grows by ``dt_growth`` after every full step and shrinks after a backtrack, like a trust region:
-on a well-posed problem it reaches Newton's method in a few steps, while steps that would climb in energy
-(towards a saddle, through a snap) are damped. An inextensible rod's tensions are augmented-Lagrangian
+(Armijo). It first tries Newton's method itself (``newton_first``: dt at its cap) and keeps it while its steps
+lower the energy; where they do not (an indefinite stiffness, a snap), it falls back to dt = ``dt0`` and lets dt
+grow by ``dt_growth`` after every full step and shrink after a backtrack, like a trust region: steps that would
+climb in energy (towards a saddle, through a snap) are damped. An inextensible rod's tensions are augmented-Lagrangian
 multipliers, updated when the inner residual is small against the force the remaining elongation stands for.
 
 Convergence: residual <= tol (and |strain| <= strain_tol). Double precision sets a floor under the residual
@@ -24,14 +25,21 @@ import numpy as np
 from ..linalg import add_diagonal, band_solve, constrain_band
 from .options import SolveResult
 from .system import (
-    constraint_residual, energy_terms, evaluate_system, floor_verdict, load_scales, max_strain, multiplier_update,
-    residual_floor, residual_norm, residual_vector, transport,
+    FLOOR_FACTOR, constraint_residual, energy_terms, evaluate_system, floor_verdict, load_scales, max_strain,
+    multiplier_update, residual_floor, residual_norm, residual_vector, transport,
 )
 
 STALL_ITERATIONS = 6
+FLOOR_STALL_ITERATIONS = 2      # enough once the residual is down at the round-off floor
 # pseudo-time step reductions (x0.1 each) before a step is declared impossible: enough to go from Newton's
 # method (dt up to 1e30) down to a step that only damps (dt ~ 1e-10); 12 near the round-off floor
 MAX_SHRINKS = 40
+
+
+def shrink(dt, options):
+    """The next pseudo-time step after a failed one: a tenth, or, from Newton's method (dt at its cap), back to
+    the cautious start ``dt0``."""
+    return options.dt0 if dt >= options.dt_max else dt * 0.1
 
 
 def solve_implicit(system, state, options, progress=None, recorder=None):
@@ -41,7 +49,7 @@ def solve_implicit(system, state, options, progress=None, recorder=None):
     t_start = time.perf_counter()
     trial = state.copy()
     last_good = state.copy()
-    dt = options.dt0
+    dt = options.dt_max if options.newton_first else options.dt0
     strain_tol = options.effective_strain_tol
     history = []
     status, message = "max_iterations", f"no convergence within {options.max_iterations} iterations"
@@ -80,7 +88,9 @@ def solve_implicit(system, state, options, progress=None, recorder=None):
                 best, since_best = min(best, residual), 0
             else:
                 since_best += 1
-            if since_best >= STALL_ITERATIONS and strain_ok:
+            if strain_ok and (since_best >= STALL_ITERATIONS or (
+                    since_best >= FLOOR_STALL_ITERATIONS
+                    and residual <= FLOOR_FACTOR * residual_floor(system, state, scales))):
                 status, floor, message = floor_verdict(system, state, scales, residual, options.tol,
                                                        f"no progress in {since_best} Newton steps")
                 break
@@ -114,7 +124,7 @@ def solve_implicit(system, state, options, progress=None, recorder=None):
                 delta, info = band_solve(work, kl, ku, perm, R)
                 slope = float(R @ delta)
                 if info != 0 or not np.all(np.isfinite(delta)) or slope <= 0:
-                    dt *= 0.1
+                    dt = shrink(dt, options)
                     continue
                 a = 1.0
                 for _ls in range(options.line_search_steps):
@@ -128,7 +138,7 @@ def solve_implicit(system, state, options, progress=None, recorder=None):
                     a *= 0.5
                 if accepted:
                     break
-                dt *= 0.1
+                dt = shrink(dt, options)
             if not accepted:
                 evaluate_system(system, state, 2)
                 status, floor, message = floor_verdict(

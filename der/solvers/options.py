@@ -25,6 +25,8 @@ class SolverOptions:
     dt0, dt_max, dt_growth : implicit pseudo-time step (dimensionless: the damping matrix is the diagonal of
         the stiffness), its cap, and the largest growth per step. dt -> infinity is Newton's method; the cap
         is high because D / dt must fall below the softest stiffness, about n^-4 of the diagonal of a long rod.
+    newton_first : start with Newton's method (dt at its cap) and fall back to dt0 when its step does not lower
+        the energy; False starts every solve at dt0.
     line_search_steps, armijo : backtracking halvings per pseudo-time step and the sufficient-decrease factor.
     dt : explicit time step (physical time for the rod's line density rho_A); None picks ``safety / omega_max``,
         half the stability limit 2 / omega_max. A dt above the stability limit is refused with a ValueError.
@@ -48,6 +50,7 @@ class SolverOptions:
     max_steps: int = 5_000_000
     time_budget: float = math.inf
     dt0: float = 1.0
+    newton_first: bool = True
     dt_max: float = 1e30
     dt_growth: float = 10.0
     line_search_steps: int = 10

@@ -260,7 +260,7 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
                                    f" (<= displacement_tol {options.displacement_tol:.0e})")
                     else:
                         status = "stalled"
-                        message = (f"stopped at the round-off floor: residual {residual:.2e} is within 10x the floor "
+                        message = (f"stopped at the round-off floor: residual {residual:.2e} is below the floor "
                                    f"{floor:.1e} but above tol {options.tol:.1e}, and a Newton correction would still "
                                    f"move the state by {err:.1e} of its displacement: the slow modes are not "
                                    "converged (use the implicit solver, a larger tol or a larger load)")

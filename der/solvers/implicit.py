@@ -15,8 +15,8 @@ climb in energy (towards a saddle, through a snap) are damped. An inextensible r
 multipliers, updated when the inner residual is small against the force the remaining elongation stands for.
 
 Convergence: residual <= tol (and |strain| <= strain_tol). Double precision sets a floor under the residual
-(``residual_floor``: the force change from rounding every coordinate); a solve whose residual stops falling
-within 10x of that floor has converged as far as the arithmetic allows and says so in its message.
+(``residual_floor``: a bound on the force change from rounding every coordinate); a solve whose residual stops
+falling below that floor has converged as far as the arithmetic allows and says so in its message.
 """
 import time
 
@@ -43,17 +43,38 @@ def shrink(dt, options):
 
 
 def solve_implicit(system, state, options, progress=None, recorder=None):
-    """Relax ``state`` (a prepared working copy, modified in place) to equilibrium. Returns a SolveResult."""
+    """Relax ``state`` (a prepared working copy, modified in place) to equilibrium. Returns a SolveResult.
+
+    With ``options.newton_first`` the first step is Newton's; if that path stalls above the round-off floor
+    (Newton steps from far away can land where round-off hides every descent direction of the soft modes)
+    the solve restarts once from the initial state with the cautious pseudo-time start, within what is left
+    of the iteration and time budgets."""
+    if not options.newton_first:
+        return _relax(system, state, options, options.dt0, progress, recorder)
+    start = state.copy()
+    t_start = time.perf_counter()
+    first = _relax(system, state, options, options.dt_max, progress, recorder, 0, t_start)
+    if first.status != "stalled":
+        return first
+    state.copy_from(start)
+    second = _relax(system, state, options, options.dt0, progress, recorder, first.iterations, t_start)
+    second.history = first.history + second.history
+    second.message += (f" (after Newton's method from the start stalled at residual {first.residual:.2e} in "
+                       f"{first.iterations} iterations and the solve restarted with dt0)")
+    return second
+
+
+def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_start=None):
+    """The pseudo-transient continuation loop from the pseudo-time step ``dt``; iterations are counted from
+    ``it`` and the time budget from ``t_start`` (so that a restart shares both with the first attempt)."""
     rod = system.rod
     kl, ku, perm = system.kl, system.ku, system.perm
-    t_start = time.perf_counter()
+    t_start = time.perf_counter() if t_start is None else t_start
     trial = state.copy()
     last_good = state.copy()
-    dt = options.dt_max if options.newton_first else options.dt0
     strain_tol = options.effective_strain_tol
     history = []
     status, message = "max_iterations", f"no convergence within {options.max_iterations} iterations"
-    it = 0
     residual = floor = np.inf
     strain = 0.0
     best, since_best = np.inf, 0

@@ -15,11 +15,15 @@ class Clamp:
 
     ``rotation`` (3x3) and ``position`` (3,) optionally prescribe where the clamp goes: the end edge is
     rotated rigidly by ``rotation`` (about the end node) and the end node moved to ``position``; the end
-    material frame follows the rotation.
+    material frame follows the rotation. ``slide`` lists coordinate axes (0, 1, 2 for x, y, z) along which the
+    clamped end may slide freely (no force along them): e.g. ``slide=(2,)`` for an end clamped in a sleeve
+    along z, which keeps its direction and frame but not its distance from the other end. Sliding must be
+    along the end tangent (an axis the end edge lies on).
     """
     end: str
     rotation: object = None
     position: object = None
+    slide: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -35,8 +39,8 @@ class FixTheta:
     edge: int
 
 
-def clamp(end="start", rotation=None, position=None):
-    return Clamp(end, rotation, position)
+def clamp(end="start", rotation=None, position=None, slide=()):
+    return Clamp(end, rotation, position, tuple(int(a) for a in np.atleast_1d(slide)))
 
 
 def pin(node, position=None):
@@ -68,6 +72,8 @@ def fixed_dofs(rod, constraints):
             k0, k1, j = end_index(rod, c.end)
             for k in (k0, k1):
                 fixed[4 * k:4 * k + 3] = True
+                for a in c.slide:
+                    fixed[4 * k + a] = False
             fixed[4 * j + 3] = True
         elif isinstance(c, Pin):
             k = _node_index(rod, c.node)
@@ -92,7 +98,16 @@ def validate(rod, constraints):
     """Check constraint arguments before any work (ValueError naming the bad value)."""
     for c in constraints:
         if isinstance(c, Clamp):
-            end_index(rod, c.end)
+            k0, k1, _ = end_index(rod, c.end)
+            if not set(c.slide) <= {0, 1, 2} or len(set(c.slide)) != len(c.slide) or len(c.slide) > 1:
+                raise ValueError(f"clamp slide must name at most one coordinate axis (0, 1 or 2); got {c.slide!r}")
+            if c.slide:
+                R = np.eye(3) if c.rotation is None else np.asarray(c.rotation, float)
+                e = R @ (rod.rest_q.reshape(-1, 4)[k1, :3] - rod.rest_q.reshape(-1, 4)[k0, :3])
+                off = np.delete(e, c.slide[0])
+                if np.abs(off).max() > 1e-12 * np.linalg.norm(e):
+                    raise ValueError(f"a clamp can slide only along its end tangent: the end edge {e / np.linalg.norm(e)}"
+                                     f" is not along axis {c.slide[0]}")
             if c.rotation is not None:
                 R = np.asarray(c.rotation, float)
                 if R.shape != (3, 3) or not np.isfinite(R).all() or not np.allclose(R @ R.T, np.eye(3), atol=1e-9) \
@@ -128,6 +143,9 @@ def apply_targets(rod, state, constraints):
             k0, k1, j = end_index(rod, c.end)
             R = np.eye(3) if c.rotation is None else np.asarray(c.rotation, float)
             p = rest_x[k0] if c.position is None else np.asarray(c.position, float)
+            if c.slide:   # a sliding clamp keeps where it has slid to
+                p = p.copy()
+                p[list(c.slide)] = x[k0, list(c.slide)]
             x[k1] = p + R @ (rest_x[k1] - rest_x[k0])
             x[k0] = p
             directors.append((j, R @ rod.rest_d1[j]))

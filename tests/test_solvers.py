@@ -171,6 +171,40 @@ def test_euler_column_stability_from_eigenvalues():
     assert kicked.stable and kicked.min_eigenvalue > 0 and kicked.state.positions[-1, 0] > 0.3 * L
 
 
+def test_greenhill_with_a_sliding_clamp():
+    """Both ends clamped, the far end sliding along the axis and turned by phi: the straight rod loses stability
+    at Greenhill's phi = 8.9868 A1/A2 (clamped ends); kicked past it, damped dynamics leave the straight state
+    (the sliding end lets the rod shorten and writhe), while Newton's method from the start returns to the
+    nearest equilibrium, the straight one, and reports it unstable."""
+    L, A1, A2, n = 1.0, 1.0, 1.0, 40
+    rod = der.rod_from_shape(der.shapes.straight(L, n, axis=(0, 0, 1)), A1, A2)
+
+    def scene(phi):
+        R = np.array([[np.cos(phi), -np.sin(phi), 0], [np.sin(phi), np.cos(phi), 0], [0, 0, 1.0]])
+        return der.Scene(rod, constraints=[der.clamp("start"), der.clamp("end", rotation=R, slide=2)])
+
+    state = rod.rest_state()
+    lams = {}
+    for phi in np.linspace(0.5, 1.2 * 8.9868, 20):
+        res = der.solve(scene(phi), state=state)
+        state = res.state
+        lams[phi] = res.min_eigenvalue
+    phis = np.array(sorted(lams))
+    lam = np.array([lams[p] for p in phis])
+    k = int(np.flatnonzero(lam <= 0)[0])
+    cross = phis[k - 1] + (phis[k] - phis[k - 1]) * lam[k - 1] / (lam[k - 1] - lam[k])
+    assert abs(cross - 8.9868) / 8.9868 < 1e-2
+    bulge = np.zeros((rod.n_nodes, 3))
+    bulge[2:-2, 0] = 1e-3 * np.sin(np.pi * rod.xi_nodes[2:-2] / L)
+    kicked = rod.displaced(state, bulge)
+    back = der.solve(scene(phis[-1]), state=kicked)
+    assert back.converged and not back.stable and np.abs(back.state.positions[:, :2]).max() < 1e-6
+    away = der.solve(scene(phis[-1]), state=kicked, newton_first=False)
+    assert away.converged and away.stable and np.abs(away.state.positions[:, :2]).max() > 0.1 * L
+    # the end slid towards the start: the rod shortened to make room for its writhe
+    assert away.state.positions[-1, 2] < state.positions[-1, 2] - 0.1 * L
+
+
 def test_scene_pays_only_for_what_it_needs():
     from der.solvers.system import build_system, evaluate_system
 

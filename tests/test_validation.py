@@ -69,6 +69,10 @@ def test_bad_loads_constraints_and_options():
         der.Scene(rod, loads=[der.end_torque([1, 0, np.nan])])
     with pytest.raises(ValueError, match=r"end must be 'start' or 'end'; got 'middle'"):
         der.Scene(rod, constraints=[der.clamp("middle")])
+    with pytest.raises(ValueError, match=r"a clamp can slide only along its end tangent"):
+        der.Scene(rod, constraints=[der.clamp("end", slide=1)])
+    with pytest.raises(ValueError, match=r"clamp slide must name at most one coordinate axis"):
+        der.Scene(rod, constraints=[der.clamp("end", slide=3)])
     with pytest.raises(ValueError, match=r"unknown energy term 'shear'"):
         der.Scene(rod, energies=("bend", "shear"))
     with pytest.raises(ValueError, match=r"SolverOptions.tol must be a number > 0; got -1"):

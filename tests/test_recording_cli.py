@@ -133,10 +133,14 @@ def test_ctrl_c_leaves_a_valid_recording(tmp_path):
     proc = subprocess.Popen([sys.executable, str(ROOT / "scenarios" / "straight_twist.py"), "--solver", "explicit",
                              "--n", "3000", "--tol", "1e-12", "--rrd", str(path), "--json"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+    # interrupt once the solver reports progress (a line per second on stderr), i.e. inside the solve
     deadline = time.time() + 120
-    while time.time() < deadline and (not path.exists() or path.stat().st_size < 2000):
-        time.sleep(0.2)
-    time.sleep(1.0)
+    line = ""
+    while time.time() < deadline and "iteration" not in line:
+        line = proc.stderr.readline()
+        if not line and proc.poll() is not None:
+            break
+    assert proc.poll() is None, "the solve ended before it could be interrupted"
     proc.send_signal(signal.SIGINT)
     stdout, _ = proc.communicate(timeout=120)
     assert proc.returncode == 3

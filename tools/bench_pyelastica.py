@@ -54,8 +54,8 @@ Fairness choices
   with both codes comes first (numba cache loads or compiles) and is reported apart. Median of --repeat runs,
   same process, one thread of work at a time.
 
-Result on a 2-core AMD EPYC (PyElastica 1.0.0, n = 50/100/200): PyElastica takes 20-35x der's time on
-straight_twist (a 1-D wave problem: 665-2511 steps), 420-670x on ring_torsion and 3600-4500x on helix_force;
+Result on a 2-core AMD EPYC (PyElastica 1.0.0, n = 50/100/200): PyElastica takes 40-190x der's time on
+straight_twist (a 1-D wave problem: 665-2511 steps), 1200-2000x on ring_torsion and 7500-11800x on helix_force;
 its error is 0.8x der's on the ring and 2.9x der's on the helix (both second order, same limit).
 """
 import argparse
@@ -79,7 +79,7 @@ try:
     import elastica as ea
     from elastica.external_forces import NoForces
 except ImportError:
-    sys.exit("bench_pyelastica.py: needs PyElastica, which der does not depend on: pip install pyelastica==1.0.0")
+    sys.exit("bench_pyelastica.py: needs PyElastica, which der does not depend on: pip install -e '.[bench]'")
 
 A1, A2 = 1.0, 1.0 / 0.67
 # per problem: PyElastica damping gamma, shear/stretch factor, load

@@ -18,10 +18,9 @@ from numba import njit
 
 from ..geometry import transport_frames
 from ..scene import evaluate, make_plan
-from .options import SolveResult
 from .system import (
-    constraint_residual, energy_terms, evaluate_system, floor_verdict, load_scales, max_strain, multiplier_update,
-    newton_error_estimate, residual_norm, residual_vector,
+    constraint_residual, energy_terms, evaluate_system, final_result, floor_verdict,
+    load_scales, max_strain, multiplier_update, newton_error_estimate, residual_norm, residual_vector,
 )
 
 STATUS_RUNNING, STATUS_CONVERGED, STATUS_NONFINITE = 0, 1, 2
@@ -284,13 +283,10 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
     except KeyboardInterrupt:
         state.copy_from(last_good)
         status, message = "interrupted", "interrupted by the user; last state kept"
-    wall = time.perf_counter() - t_start
-    evaluate_system(system, state, 1)
-    per_length = residual_norm(system, residual_vector(system), load_scales(system, state), per_length=True)
-    res = SolveResult(state=state, converged=status == "converged", status=status, residual=float(residual),
-                      iterations=steps, wall_time=wall, message=message + f" ({rejected_total} steps rejected; "
-                      f"stiffest mode: {stiffest}, dt_max {dt_max:.2e})", solver="explicit", strain=strain,
-                      load_scale=float(load_scales(system, state)[0]), energy=energy_terms(system, state),
-                      history=history, dt=dt, residual_floor=float(floor), residual_per_length=per_length)
+    res = final_result(system, state, status, residual=float(residual), iterations=steps,
+                       wall_time=time.perf_counter() - t_start,
+                       message=message + f" ({rejected_total} steps rejected; stiffest mode: {stiffest}, dt_max "
+                       f"{dt_max:.2e})", solver="explicit", strain=strain, history=history, dt=dt,
+                       residual_floor=float(floor))
     res.total_energy = energies
     return res

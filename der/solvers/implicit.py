@@ -23,10 +23,10 @@ import time
 import numpy as np
 
 from ..linalg import add_diagonal, band_solve, constrain_band
-from .options import SolveResult
 from .system import (
-    FLOOR_FACTOR, constraint_residual, energy_terms, evaluate_system, floor_verdict, load_scales, max_strain,
-    multiplier_update, residual_floor, residual_norm, residual_vector, transport,
+    FLOOR_FACTOR, constraint_residual, energy_terms, evaluate_system, final_result, floor_verdict,
+    load_scales, max_strain, multiplier_update, residual_floor, residual_norm, residual_vector,
+    transport,
 )
 
 STALL_ITERATIONS = 6
@@ -176,10 +176,6 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     except KeyboardInterrupt:
         state.copy_from(last_good)
         status, message = "interrupted", "interrupted by the user; last state kept"
-    wall = time.perf_counter() - t_start
-    evaluate_system(system, state, 1)
-    per_length = residual_norm(system, residual_vector(system), load_scales(system, state), per_length=True)
-    return SolveResult(state=state, converged=status == "converged", status=status, residual=float(residual),
-                       iterations=it, wall_time=wall, message=message, solver="implicit", strain=strain,
-                       load_scale=float(load_scales(system, state)[0]), energy=energy_terms(system, state),
-                       history=history, dt=dt, residual_floor=float(floor), residual_per_length=per_length)
+    return final_result(system, state, status, residual=float(residual), iterations=it,
+                        wall_time=time.perf_counter() - t_start, message=message, solver="implicit", strain=strain,
+                        history=history, dt=dt, residual_floor=float(floor))

@@ -211,6 +211,18 @@ def floor_verdict(system, state, scales, residual, tol, what):
                               f"{tol:.1e}; {what}")
 
 
+def final_result(system, state, status, **fields):
+    """The SolveResult of a solve that ended in ``status`` at ``state``: the force-derived fields (load scale,
+    residual per unit length, energy by term) are evaluated here, once, for both solvers."""
+    from .options import SolveResult
+
+    evaluate_system(system, state, 1)
+    scales = load_scales(system, state)
+    per_length = residual_norm(system, residual_vector(system), scales, per_length=True)
+    return SolveResult(state=state, converged=status == "converged", status=status, load_scale=float(scales[0]),
+                       energy=energy_terms(system, state), residual_per_length=per_length, **fields)
+
+
 def max_strain(system, state):
     rod = system.rod
     return float(np.max(np.abs(elongations(state.q, rod.edge_nodes, rod.l_bar) / rod.l_bar)))

@@ -19,7 +19,7 @@ from numba import njit
 from ..geometry import transport_frames
 from ..scene import evaluate, make_plan
 from .system import (
-    constraint_residual, energy_terms, evaluate_system, final_result, floor_verdict,
+    INTERRUPTS, constraint_residual, energy_terms, evaluate_system, final_result, floor_verdict, is_interrupt,
     load_scales, max_strain, multiplier_update, newton_error_estimate, residual_norm, residual_vector,
 )
 
@@ -280,7 +280,9 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
                 dt_stable, bounds = stable_time_step(system, state)
                 dt_max = min(dt_max, options.safety * 0.5 * dt_stable)
                 dt = min(dt, dt_max)
-    except KeyboardInterrupt:
+    except INTERRUPTS as exc:
+        if not is_interrupt(exc):
+            raise
         state.copy_from(last_good)
         status, message = "interrupted", "interrupted by the user; last state kept"
     res = final_result(system, state, status, residual=float(residual), iterations=steps,

@@ -24,8 +24,8 @@ import numpy as np
 
 from ..linalg import add_diagonal, band_solve, constrain_band
 from .system import (
-    FLOOR_FACTOR, constraint_residual, energy_terms, evaluate_system, final_result, floor_verdict,
-    load_scales, max_strain, multiplier_update, residual_floor, residual_norm, residual_vector,
+    FLOOR_FACTOR, INTERRUPTS, constraint_residual, energy_terms, evaluate_system, final_result, floor_verdict,
+    is_interrupt, load_scales, max_strain, multiplier_update, residual_floor, residual_norm, residual_vector,
     transport,
 )
 
@@ -173,7 +173,9 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
             total_descent += descent
             # trust the pseudo-time step more after a full step, less after a backtrack
             dt = min(options.dt_max, dt * options.dt_growth) if a == 1.0 else max(dt * a, 1e-12)
-    except KeyboardInterrupt:
+    except INTERRUPTS as exc:
+        if not is_interrupt(exc):
+            raise
         state.copy_from(last_good)
         status, message = "interrupted", "interrupted by the user; last state kept"
     return final_result(system, state, status, residual=float(residual), iterations=it,

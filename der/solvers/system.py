@@ -211,6 +211,19 @@ def floor_verdict(system, state, scales, residual, tol, what):
                               f"{tol:.1e}; {what}")
 
 
+INTERRUPTS = (KeyboardInterrupt, SystemError)
+
+
+def is_interrupt(exc):
+    """True for Ctrl-C, also when it arrived inside a numba call: numba then raises a SystemError whose cause
+    is the KeyboardInterrupt."""
+    while exc is not None:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
 def final_result(system, state, status, **fields):
     """The SolveResult of a solve that ended in ``status`` at ``state``: the force-derived fields (load scale,
     residual per unit length, energy by term) are evaluated here, once, for both solvers."""

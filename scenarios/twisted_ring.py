@@ -156,14 +156,14 @@ def _picture(base, items, kappa0, p):
                 for o, st in items) * p.a0
     for i, (obs, state) in enumerate(items):
         rod = base.with_imposed_twist(obs["twist"])
-        x = state.positions
+        x = state.positions - state.positions.mean(axis=0)   # centred: the free ring drifts as it writhes
         x = np.vstack([x, x[:1]])
         strain = dg.material_twist_density(rod, state) * p.a0   # twist per length, in 1/a0 (natural twist 0)
         ax = fig.add_subplot(1, len(items), i + 1, projection="3d")
         c = plt.cm.coolwarm(0.5 + 0.5 * np.clip(strain / max(scale, 1e-12), -1, 1))
         for j in range(rod.n_edges):
             ax.plot(x[j:j + 2, 0], x[j:j + 2, 1], x[j:j + 2, 2], color=c[j], lw=2.5)
-        lim = 1.0 * p.a0
+        lim = max(1.0 * p.a0, float(np.abs(x).max()))
         ax.set(xlim=(-lim, lim), ylim=(-lim, lim), zlim=(-lim, lim))
         ax.set_box_aspect((1, 1, 1), zoom=1.3)
         ax.set_axis_off()

@@ -2,11 +2,14 @@
 import dataclasses
 import sys
 import time
+import warnings
 
 import numpy as np
 
-from .options import STATUSES, ConvergenceError, SolveResult, SolverOptions
-from .system import build_system, prepare_state
+from .options import (
+    STATUSES, ConvergenceError, LockedRodWarning, RoundoffFloorWarning, SolveResult, SolverOptions,
+)
+from .system import build_system, check_equilibrium_exists, locked_rod_note, prepare_state
 
 SOLVERS = ("implicit", "explicit")
 
@@ -46,6 +49,12 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
     Returns
     -------
     SolveResult, with the stability of the equilibrium (``min_eigenvalue``, ``stable``) when converged.
+
+    Raises ValueError before any work for a load whose scale is not a finite double, and for a scene with no
+    static equilibrium (a net dead force along a translation, or a net dead torque about a rotation, that its
+    constraints leave free). Warns ``RoundoffFloorWarning`` for status "converged_at_floor" (converged, but at
+    the round-off floor above ``tol``) and ``LockedRodWarning`` for an inextensible rod locked between fixed
+    ends (constraint tension far above A1/L^2 that its loads do not explain).
     """
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}; got {solver!r}")
@@ -61,8 +70,9 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
     elif not (np.isfinite(state.q).all() and np.isfinite(state.d1).all() and np.isfinite(state.reference_twist).all()):
         bad = int(np.flatnonzero(~np.isfinite(state.q))[0]) if not np.isfinite(state.q).all() else -1
         raise ValueError(f"the starting state must be finite (entry {bad} of q is {state.q[bad] if bad >= 0 else '?'})")
-    system = build_system(scene, options)
+    system = build_system(scene, options)     # refuses loads whose scale is not a finite double
     work = prepare_state(system, state)
+    check_equilibrium_exists(system, work)    # refuses a net load on a rigid motion nothing can react to
     recorder = None
     if record is not None:
         from ..recording import Recorder
@@ -79,6 +89,13 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
             from .explicit import solve_explicit
 
             result = solve_explicit(system, work, options, progress, recorder)
+        if result.status != "interrupted":
+            note = locked_rod_note(system, result.state)
+            if note:
+                result.message += f"; {note}"
+                warnings.warn(note, LockedRodWarning, stacklevel=2)
+        if result.status == "converged_at_floor":
+            warnings.warn(f"{solver} solve: {result.message}", RoundoffFloorWarning, stacklevel=2)
         if result.converged and options.stability:
             from .stability import stability
 
@@ -105,4 +122,5 @@ def check_stability(scene, state, n_eigenvalues=6):
     return stability(system, result, n_eigenvalues)
 
 
-__all__ = ["solve", "check_stability", "SolverOptions", "SolveResult", "ConvergenceError", "STATUSES", "SOLVERS"]
+__all__ = ["solve", "check_stability", "SolverOptions", "SolveResult", "ConvergenceError", "STATUSES", "SOLVERS",
+           "RoundoffFloorWarning", "LockedRodWarning"]

@@ -248,13 +248,13 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
                 verdict, floor, msg = floor_verdict(system, state, load_scales(system, state), residual,
                                                     options.tol, f"no progress in {since_best * options.check_every}"
                                                     " steps")
-                if verdict == "converged":
+                if verdict == "converged_at_floor":
                     # At the round-off floor the slow modes are driven by forces buried in round-off, so unlike
                     # Newton the explicit solver cannot claim convergence from the residual: certify with the
                     # size of one Newton correction (not applied), the error left in the slow modes.
                     err = newton_error_estimate(system, state)
                     if err <= options.displacement_tol:
-                        status = "converged"
+                        status = "converged_at_floor"
                         message = (msg + f"; a Newton correction would move it by {err:.1e} of the displacement"
                                    f" (<= displacement_tol {options.displacement_tol:.0e})")
                     else:

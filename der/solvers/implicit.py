@@ -24,9 +24,9 @@ import numpy as np
 
 from ..linalg import add_diagonal, band_solve, constrain_band
 from .system import (
-    FLOOR_FACTOR, INTERRUPTS, constraint_residual, energy_terms, evaluate_system, final_result, floor_verdict,
-    is_interrupt, load_scales, max_strain, multiplier_update, residual_floor, residual_norm, residual_vector,
-    transport,
+    FLOOR_FACTOR, INTERRUPTS, constraint_residual, energy_terms, evaluate_system, final_result, floor_forces,
+    floor_verdict, is_interrupt, load_scales, max_strain, multiplier_update, residual_floor, residual_norm,
+    residual_vector, transport,
 )
 
 STALL_ITERATIONS = 6
@@ -80,7 +80,8 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     best, since_best = np.inf, 0
     last_update = None
     just_updated = False
-    descent = total_descent = 0.0
+    descent = total_descent = noise = 0.0
+    potential = potential_best = 0.0     # E - work of the loads, from the start of this loop
     ab_K = np.empty_like(system.ab)
     work = np.empty_like(system.ab)
     try:
@@ -90,9 +91,11 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
             scales = load_scales(system, state)
             residual = residual_norm(system, R, scales)
             strain = max_strain(system, state) if rod.inextensible else 0.0
-            if not (np.isfinite(energy) and np.isfinite(residual)):
+            if not (np.isfinite(energy) and np.isfinite(residual) and np.isfinite(scales).all()):
+                # (an infinite force scale would make every residual 0: never a verdict)
                 state.copy_from(last_good)
-                status, message = "nonfinite", f"non-finite energy or force at iteration {it}; last finite state kept"
+                status, message = "nonfinite", (f"non-finite energy, force or force scale at iteration {it}; last "
+                                                "finite state kept")
                 break
             last_good.copy_from(state)
             history.append(residual)
@@ -104,9 +107,14 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
             if residual <= options.tol and strain_ok:
                 status, message = "converged", f"residual {residual:.2e} <= tol {options.tol:.1e}"
                 break
-            # progress: the residual halves, or the energy still falls (leaving a saddle can raise the residual)
-            if residual < 0.5 * best or descent > 1e-9 * max(abs(energy), total_descent):
+            # progress: the residual halves, or the energy (minus the load work) still falls to a new low
+            # (leaving a saddle can raise the residual) by more than the round-off forces could account for along
+            # the step (floor forces . |step|). Judged against the energy alone, descents of 1e-24 in an energy of
+            # 1e-18 -- a state rounding back and forth between two neighbours -- counted as progress for ever.
+            if residual < 0.5 * best or (
+                    potential < potential_best - max(1e-9 * max(abs(energy), total_descent), noise)):
                 best, since_best = min(best, residual), 0
+                potential_best = min(potential_best, potential)
             else:
                 since_best += 1
             if strain_ok and (since_best >= STALL_ITERATIONS or (
@@ -135,6 +143,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
             diag = np.abs(ab_K[kl + ku, :][perm])
             diag[diag == 0] = 1.0
             fext = system.fext.copy()
+            round_off = floor_forces(system, state)
             accepted = False
             for _attempt in range(MAX_SHRINKS):
                 if _attempt == 12 and residual < 100.0 * residual_floor(system, state, scales):
@@ -143,7 +152,8 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 add_diagonal(work, kl, ku, perm, diag, 1.0 / dt)
                 constrain_band(work, kl, ku, perm, system.fixed, 1.0)
                 delta, info = band_solve(work, kl, ku, perm, R)
-                slope = float(R @ delta)
+                with np.errstate(over="ignore", invalid="ignore"):   # a huge step is refused just below
+                    slope = float(R @ delta)
                 if info != 0 or not np.all(np.isfinite(delta)) or slope <= 0:
                     dt = shrink(dt, options)
                     continue
@@ -168,8 +178,14 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 if not strain_ok:
                     status = "stalled"
                 break
+            # the progress measure uses the step actually taken (q + a delta rounded), not a delta: at the floor a
+            # step can round back and forth between two states and credit the load work a fext.delta each time
+            step = trial.q - state.q
+            change = e_trial - energy - float(fext @ step)
+            potential += change
+            descent = max(-change, 0.0)
+            noise = float(round_off @ np.abs(step))
             state.copy_from(trial)
-            descent = max(-merit, 0.0)
             total_descent += descent
             # trust the pseudo-time step more after a full step, less after a backtrack
             dt = min(options.dt_max, dt * options.dt_growth) if a == 1.0 else max(dt * a, 1e-12)
@@ -178,6 +194,11 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
             raise
         state.copy_from(last_good)
         status, message = "interrupted", "interrupted by the user; last state kept"
+    except ArithmeticError as exc:
+        # a numerical failure inside a kernel (division by zero, overflow) ends the solve like a NaN would
+        state.copy_from(last_good)
+        status, message = "nonfinite", (f"numerical failure at iteration {it} ({type(exc).__name__}: {exc}); last "
+                                        "finite state kept")
     return final_result(system, state, status, residual=float(residual), iterations=it,
                         wall_time=time.perf_counter() - t_start, message=message, solver="implicit", strain=strain,
                         history=history, dt=dt, residual_floor=float(floor))

@@ -95,6 +95,8 @@ class SolverOptions:
 
 STATUSES = {
     "converged": "residual below tol",
+    "converged_at_floor": "residual stopped at the round-off floor of double precision, above tol (converged is "
+                          "True; the message gives residual / tol and a RoundoffFloorWarning is emitted)",
     "max_iterations": "iteration or step limit reached before tol",
     "time_budget": "wall-clock budget used up before tol",
     "stalled": "no step could reduce the residual (at the round-off floor, or a singular/indefinite system)",
@@ -103,12 +105,28 @@ STATUSES = {
 }
 
 
+CONVERGED_STATUSES = ("converged", "converged_at_floor")
+
+
+class RoundoffFloorWarning(UserWarning):
+    """A solve stopped at the round-off floor of its residual, above the requested ``tol`` (status
+    "converged_at_floor"): the arithmetic cannot certify the equilibrium more closely. The message gives the
+    ratio residual / tol."""
+
+
+class LockedRodWarning(UserWarning):
+    """An inextensible rod held at both ends carries a constraint tension far above its bending scale A1/L^2
+    that its loads do not explain: it is locked between its fixed ends (it cannot bend without changing its
+    chord), so its answer is the inextensible limit, not beam theory."""
+
+
 @dataclass
 class SolveResult:
     """Outcome of a solve (like scipy.optimize.OptimizeResult).
 
     state : the final RodState (the last finite one on failure).
-    converged, status, message : whether and why the solve stopped (``STATUSES``).
+    converged, status, message : whether and why the solve stopped (``STATUSES``); converged is True for
+        "converged" (residual <= tol) and "converged_at_floor" (stopped at the round-off floor above tol).
     residual : final residual (dimensionless, relative to ``load_scale``); strain : largest |axial strain|.
     residual_floor : round-off floor of the residual, when it was estimated (NaN otherwise).
     residual_per_length : the same imbalance per unit length (see ``der.solvers.system``), n times the residual

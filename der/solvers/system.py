@@ -75,6 +75,49 @@ def rotational_inertia(rod):
     return rod.rho_A * h * h * rod.A2 / (4.0 * rod.A1)
 
 
+def safe_norm(v):
+    """Euclidean norm of a vector without overflow or underflow (scaled by its largest entry, like np.hypot):
+    |(1e200, 0, 0)| is 1e200, not inf."""
+    v = np.asarray(v, dtype=float)
+    m = float(np.abs(v).max()) if v.size else 0.0
+    if m == 0.0 or not np.isfinite(m):
+        return m
+    return m * float(np.sqrt(((v / m) ** 2).sum()))
+
+
+def row_norms(a):
+    """Euclidean norm of each row of ``a`` (k, 3) without overflow or underflow."""
+    m = float(np.abs(a).max()) if a.size else 0.0
+    if m == 0.0 or not np.isfinite(m):
+        return np.full(a.shape[0], m)
+    return m * np.sqrt(((a / m) ** 2).sum(axis=1))
+
+
+def applied_scales(scene):
+    """(F_app, M_app): the largest applied force (point loads, distributed loads times L) and moment (torques,
+    twisting moments times L). A load whose scale, or the moment it implies over the rod length (F L), is not
+    a finite double is refused with a ValueError naming it: a residual relative to an infinite scale is 0 and
+    would certify anything."""
+    L = scene.rod.length
+    F_app = M_app = 0.0
+    for load in scene.loads:
+        f = m = 0.0
+        if isinstance(load, (PointForce, EndForce)):
+            f = safe_norm(load.force)
+        elif isinstance(load, DistributedForce):
+            f = safe_norm(load.density) * L
+        elif isinstance(load, EndTorque):
+            m = abs(float(load.torque)) if load.follower else safe_norm(load.torque)
+        elif isinstance(load, TwistingMoment):
+            m = abs(load.density) * L
+        if not (np.isfinite(f) and np.isfinite(m) and np.isfinite(f * L) and np.isfinite(m / L)):
+            raise ValueError(f"load {load!r}: its scale (|force| {f:.3e}, |moment| {m:.3e}, over the rod length "
+                             f"L = {L:g}) is not a finite double; scale the problem (units) so that its loads "
+                             "are representable")
+        F_app, M_app = max(F_app, f), max(M_app, m)
+    return F_app, M_app
+
+
 def build_system(scene, options):
     rod = scene.rod
     k = axial_penalty(rod, options)
@@ -95,16 +138,7 @@ def build_system(scene, options):
     mass = np.repeat(rod.rho_A * node_len, 4)
     mass[3::4] = 1.0
     mass[4 * np.arange(rod.n_edges) + 3] = rotational_inertia(rod) * rod.l_bar
-    F_app = M_app = 0.0
-    for load in scene.loads:
-        if isinstance(load, (PointForce, EndForce)):
-            F_app = max(F_app, float(np.linalg.norm(load.force)))
-        elif isinstance(load, DistributedForce):
-            F_app = max(F_app, float(np.linalg.norm(load.density)) * L)
-        elif isinstance(load, EndTorque):
-            M_app = max(M_app, float(np.abs(load.torque) if load.follower else np.linalg.norm(load.torque)))
-        elif isinstance(load, TwistingMoment):
-            M_app = max(M_app, abs(load.density) * L)
+    F_app, M_app = applied_scales(scene)
     system = System(scene, rod, plan, fixed, ~fixed, kl, ku, perm, plan.k_stretch, weights, is_theta, mass, F_app,
                     M_app, np.zeros(n), np.zeros(n), new_band(n, kl, ku))
     system.k_initial = plan.k_stretch.copy()
@@ -123,7 +157,7 @@ def load_scales(system, state):
     F, M = _edge_forces(state.q, state.d1, state.reference_twist, state.lam, rod.edge_nodes, rod.vertex_nodes,
                         rod.vertex_edges, rod.l_bar, plan.k_stretch, rod.kappa_bar, rod.twist_bar, plan.weld,
                         rod.voronoi, rod.A1, rod.A2, plan.has_stretch, plan.has_bend, plan.has_twist)
-    f_int = float(np.sqrt((F * F).sum(axis=1)).max()) if F.size else 0.0
+    f_int = float(row_norms(F).max()) if F.size else 0.0
     m_int = float(M.max()) if M.size else 0.0
     L = rod.length
     F_raw = max(system.applied_force, f_int)
@@ -151,14 +185,20 @@ def residual_norm(system, R, scales, per_length=False):
     return float(np.max(np.abs(R) / s)) if R.size else 0.0
 
 
+def floor_forces(system, state):
+    """eps |K| |q| per DOF (force units): a bound on the generalized force change from rounding every
+    coordinate, zero on fixed DOFs. Needs ``system.ab`` evaluated at ``state``."""
+    out = np.empty(system.n_dof)
+    band_matvec(system.ab, system.kl, system.ku, system.perm, state.q, out, True)
+    out[system.fixed] = 0.0
+    return np.finfo(float).eps * out
+
+
 def residual_floor(system, state, scales):
     """Round-off floor of the residual: eps |K| |q| (the force change from rounding every coordinate), in
     residual units. Positions are rounded relative to their size, so the floor grows with the distance from
     the origin, the stiffness and the fourth power of n (the bending stiffness of an edge scales as 1/h^3)."""
-    out = np.empty(system.n_dof)
-    band_matvec(system.ab, system.kl, system.ku, system.perm, state.q, out, True)
-    out[system.fixed] = 0.0
-    return np.finfo(float).eps * residual_norm(system, out, scales)
+    return residual_norm(system, floor_forces(system, state), scales)
 
 
 def newton_error_estimate(system, state):
@@ -198,15 +238,31 @@ def newton_error_estimate(system, state):
 # the floor is a worst-case bound (every coordinate's rounding adding up); converged solves end at 0.2-0.4x
 # of it, and accepting 10x let a ring of 30,000 edges stop with a 1e-3 error
 FLOOR_FACTOR = 1.0
+# The largest floor a verdict may rest on. The floor is a bound on the force that rounding the coordinates can
+# produce, relative to the force scale; at 1 it is as large as the largest force of the problem, and a residual
+# below it can no longer tell an equilibrium from a state with no equilibrium at all (a free rod under a net
+# force "converged" below a floor of 2.0 at residual 0.93). Below 1 a residual at the floor still certifies the
+# balance to that fraction of the load: a straight inextensible cantilever under an axial force of 1e-6 A1/L^2
+# at n = 400 is exact (no motion) yet its residual stops at 0.13 of the load, under a floor of 0.55, because the
+# penalty stiffness c A1/h^3 times the rounding of coordinates of size L is that large against so small a load
+# (the cancellation of absolute coordinates, issue 17). Such a verdict is "converged_at_floor", with a warning.
+FLOOR_MAX = 1.0
 
 
 def floor_verdict(system, state, scales, residual, tol, what):
-    """Status and message for a solve whose residual stopped falling: converged at the round-off floor if the
-    residual is below FLOOR_FACTOR times it, stalled otherwise. Needs ``system.ab`` evaluated at ``state``."""
+    """Status, floor and message for a solve whose residual stopped falling: "converged_at_floor" if the
+    residual is below FLOOR_FACTOR times the round-off floor and that floor is below FLOOR_MAX (a larger bound
+    means the estimate certifies nothing), "stalled" otherwise. Needs ``system.ab`` evaluated at ``state``."""
     floor = residual_floor(system, state, scales)
+    if residual <= FLOOR_FACTOR * floor and floor < FLOOR_MAX:
+        return "converged_at_floor", floor, (
+            f"converged at the round-off floor, above tol: residual {residual:.2e} is {residual / tol:.3g} times "
+            f"tol {tol:.1e}, below the floor {floor:.1e} of double precision; {what}")
     if residual <= FLOOR_FACTOR * floor:
-        return "converged", floor, (f"converged to the round-off floor: residual {residual:.2e} (tol {tol:.1e}) is "
-                                    f"below the floor {floor:.1e} of double precision; {what}")
+        return "stalled", floor, (
+            f"residual stuck at {residual:.2e} (tol {tol:.1e}); the round-off floor bound {floor:.1e} is not "
+            f"below {FLOOR_MAX:g} times the force scale, so it certifies nothing (a load too small for the "
+            f"stiffness, or no equilibrium); {what}")
     return "stalled", floor, (f"residual stuck at {residual:.2e}, above the round-off floor {floor:.1e} and tol "
                               f"{tol:.1e}; {what}")
 
@@ -227,12 +283,16 @@ def is_interrupt(exc):
 def final_result(system, state, status, **fields):
     """The SolveResult of a solve that ended in ``status`` at ``state``: the force-derived fields (load scale,
     residual per unit length, energy by term) are evaluated here, once, for both solvers."""
-    from .options import SolveResult
+    from .options import CONVERGED_STATUSES, SolveResult
 
     evaluate_system(system, state, 1)
     scales = load_scales(system, state)
+    if status in CONVERGED_STATUSES and not np.isfinite(scales).all():
+        # a residual relative to an infinite scale is 0 whatever the forces: no verdict can rest on it
+        status = "nonfinite"
+        fields["message"] = f"the force scale became non-finite ({scales[0]:.3g}, {scales[1]:.3g}); no verdict"
     per_length = residual_norm(system, residual_vector(system), scales, per_length=True)
-    return SolveResult(state=state, converged=status == "converged", status=status, load_scale=float(scales[0]),
+    return SolveResult(state=state, converged=status in CONVERGED_STATUSES, status=status, load_scale=float(scales[0]),
                        energy=energy_terms(system, state), residual_per_length=per_length, **fields)
 
 
@@ -281,8 +341,13 @@ def transport(system, base, q_new, out):
     if out is not base:
         out.q[:] = q_new
         out.lam[:] = base.lam
-    ok = transport_frames(out.q, rod.edge_nodes, rod.vertex_edges, base.tangents, base.d1, base.reference_twist,
-                          out.tangents, out.d1, out.reference_twist)
+    try:
+        ok = transport_frames(out.q, rod.edge_nodes, rod.vertex_edges, base.tangents, base.d1, base.reference_twist,
+                              out.tangents, out.d1, out.reference_twist)
+    except ZeroDivisionError:
+        # a director transported onto its own tangent (a step that turned an edge by ~pi, or a vanishing edge):
+        # a failed step like a reversed edge, not an exception out of the solve
+        return False
     return bool(ok)
 
 
@@ -329,3 +394,101 @@ def energy_terms(system, state):
         out["twist"] = float(twist_energy(state.q, rod.vertex_edges, state.reference_twist, plan.weld, rod.twist_bar,
                                           rod.voronoi, rod.A2))
     return out
+
+
+def _fmt_vector(v):
+    return "(" + ", ".join(f"{x:.6g}" for x in v) + ")"
+
+
+def check_equilibrium_exists(system, state):
+    """Refuse, before the solve, a scene that has no static equilibrium because a rigid motion its constraints
+    leave free is pushed by a load that does work on it whatever the configuration: a net dead force along a
+    free translation, or (with no forces and no follower loads) a net dead torque about a free rotation.
+    Internal forces do no work on rigid motions, so nothing can balance such a load; the solve would only run
+    into its iteration limit (or, inextensible, into a degenerate step). Raises ValueError."""
+    rod, scene = system.rod, system.scene
+    fixed = system.fixed.copy()
+    if not rod.closed:
+        fixed[4 * rod.n_nodes - 1] = False       # the dummy slot is not a constraint
+    net_force = np.zeros(3)
+    total = 0.0                                  # sum of |forces|: the scale of round-off in their sum
+    net_torque = np.zeros(3)
+    torque_total = 0.0
+    conservative_torques_only = True
+    for load in scene.loads:
+        if isinstance(load, (PointForce, EndForce)):
+            f = np.asarray(load.force, float)
+        elif isinstance(load, DistributedForce):
+            # the total the rod receives: the density times the sum of the nodes' Voronoi lengths
+            f = np.asarray(load.density, float) * float(rod.l_bar.sum())
+        else:
+            if isinstance(load, EndTorque) and not load.follower:
+                net_torque += np.asarray(load.torque, float)
+                torque_total += safe_norm(load.torque)
+            else:
+                conservative_torques_only = False    # follower moments turn with the rod
+            continue
+        net_force += f
+        total += safe_norm(f)
+        if np.any(f != 0.0):
+            conservative_torques_only = False        # forces have a moment that depends on the configuration
+    what = "an unconstrained rod" if not fixed.any() else None
+    free_axes = [a for a in range(3) if not fixed.reshape(-1, 4)[:, a].any()]
+    bad = [a for a in free_axes if abs(net_force[a]) > 1e-12 * total]
+    if bad:
+        where = what or f"a rod whose constraints cannot react along {', '.join('xyz'[a] for a in bad)}"
+        raise ValueError(f"net applied force {_fmt_vector(net_force)} on {where}: no static equilibrium exists "
+                         "(add a clamp or pin that can react, or balance the loads)")
+    if conservative_torques_only and torque_total > 0.0:
+        bad = [a for a in range(3) if abs(net_torque[a]) > 1e-12 * torque_total
+               and _rotation_is_free(system, state, fixed, a)]
+        if bad:
+            where = what or f"a rod whose constraints leave it free to rotate about {', '.join('xyz'[a] for a in bad)}"
+            raise ValueError(f"net applied torque {_fmt_vector(net_torque)} on {where}, with no force to balance "
+                             "it: no static equilibrium exists (add a clamp, or balance the torques)")
+
+
+def _rotation_is_free(system, state, fixed, a):
+    """Whether a rigid rotation about coordinate axis ``a`` -- about the one pinned node, or the centroid -- moves
+    no fixed DOF (the centre used by ``stability.symmetry_modes``)."""
+    rod = system.rod
+    x = state.positions
+    pinned = [k for k in range(rod.n_nodes) if fixed[4 * k:4 * k + 3].all()]
+    centre = x[pinned[0]] if len(pinned) == 1 else x.mean(axis=0)
+    w = np.zeros(3)
+    w[a] = 1.0
+    v = np.zeros(rod.n_dof)
+    v.reshape(-1, 4)[:, :3] = np.cross(w, x - centre)
+    v[4 * np.arange(rod.n_edges) + 3] = state.tangents @ w
+    if not rod.closed:
+        v[4 * rod.n_nodes - 1] = 0.0
+    return bool(np.abs(v[fixed]).max(initial=0.0) < 1e-12 * np.abs(v).max())
+
+
+# constraint tension against the larger of the bending scale A1/L^2 and the applied load scale above which an
+# inextensible rod held at both ends is reported locked: at T = 100 A1/L^2 the boundary layers at the clamps are
+# L/10 wide (sqrt(A1/T)); an Euler-buckled rod between clamps carries 4 pi^2 A1/L^2 ~ 40
+LOCK_RATIO = 100.0
+
+
+def locked_rod_note(system, state):
+    """A note (or "") for an inextensible open rod whose two end nodes are held in place and whose constraint
+    tension is more than LOCK_RATIO times both its bending scale A1/L^2 and its applied loads: the rod cannot
+    bend without changing its chord, so its multipliers grow until they pull it straight with boundary layers at
+    the ends -- the true inextensible limit, but not the beam theory a user may expect."""
+    rod = system.rod
+    if not rod.inextensible or rod.closed:
+        return ""
+    fixed = system.fixed
+    if not (fixed[0:3].all() and fixed[4 * (rod.n_nodes - 1):4 * (rod.n_nodes - 1) + 3].all()):
+        return ""
+    g = elongations(state.q, rod.edge_nodes, rod.l_bar)
+    tension = float(np.abs(state.lam + system.k_stretch * g).max())
+    L = rod.length
+    bending = float(np.max(rod.A1)) / L ** 2
+    loads = system.applied_force + system.applied_moment / L
+    if not tension > LOCK_RATIO * max(bending, loads):
+        return ""
+    return (f"the inextensible rod is locked between fixed ends; give it EA or a sliding clamp (its constraint "
+            f"tension {tension:.3g} is {tension / bending:.3g} times the bending scale A1/L^2 = {bending:.3g}, "
+            f"and its loads apply at most {loads:.3g})")

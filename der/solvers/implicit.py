@@ -16,7 +16,9 @@ multipliers, updated when the inner residual is small against the force the rema
 
 Convergence: residual <= tol (and |strain| <= strain_tol). Double precision sets a floor under the residual
 (``residual_floor``: a bound on the force change from rounding every coordinate); a solve whose residual stops
-falling below that floor has converged as far as the arithmetic allows and says so in its message.
+falling below that floor has converged as far as the arithmetic allows: status "converged_at_floor" (unless the
+bound is 1 or more, when it certifies nothing). "Stops falling" means: no halving of the residual, and no new
+low of the energy minus the load work by more than the round-off forces can do along the step actually taken.
 """
 import time
 

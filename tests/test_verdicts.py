@@ -48,6 +48,21 @@ def test_huge_end_force_does_not_converge_at_rest():
     assert np.isfinite(res.residual) and res.residual > 1e-3
 
 
+def test_helix_torque_scenario_with_a_huge_end_force_does_not_converge():
+    # issue 11.1: `scenarios/helix_torque.py --P 1e300 --json` exited 0 with converged true and error 1.0
+    import importlib.util
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    path = Path(__file__).resolve().parents[1] / "scenarios" / "helix_torque.py"
+    spec = importlib.util.spec_from_file_location("helix_torque", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    p = SimpleNamespace(A1=1.0, A2=1.0 / 0.67, kappa0=1.0, omega0=0.6, P=1e300, T=2e-5, n=40)
+    res = solve_quiet(mod.build(p))
+    assert not res.converged and np.isfinite(res.load_scale)
+
+
 @pytest.mark.parametrize("load, length", [
     (der.end_force([1.5e308, 1.5e308, 0]), 1.0),      # |F| overflows
     (der.distributed_force([0, 1e308, 0]), 2.0),      # density times L overflows
@@ -172,12 +187,16 @@ def _turned_end_scene(n, EA=None, slide=()):
     return der.Scene(rod, constraints=[der.clamp("start"), der.clamp("end", rotation=R, slide=slide)])
 
 
-def test_locked_inextensible_rod_warns_and_says_so():
+@pytest.mark.parametrize("n", [50, 100])
+def test_locked_inextensible_rod_warns_and_says_so(n):
+    # issue 11.6: reported converged and stable (n = 100) or failed without a hint (n = 50)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", der.RoundoffFloorWarning)
         with pytest.warns(der.LockedRodWarning, match="locked between fixed ends; give it EA or a sliding clamp"):
-            res = der.solve(_turned_end_scene(100), stability=False, raise_on_failure=False)
+            res = der.solve(_turned_end_scene(n), stability=False, raise_on_failure=False)
     assert "the inextensible rod is locked between fixed ends" in res.message
+    # the tension it reports is the constraint's, orders of magnitude above the bending scale A1/L^2 = 1
+    assert res.load_scale > 100.0
 
 
 def test_extensible_rod_with_a_turned_end_is_not_reported_locked_and_follows_beam_theory():

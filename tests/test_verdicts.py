@@ -138,6 +138,26 @@ def test_a_numerical_failure_inside_the_solve_is_a_status_with_a_finite_state():
     assert np.isfinite(res.state.q).all() and np.isfinite(res.residual)
 
 
+def test_an_arithmetic_error_in_a_kernel_ends_the_solve_as_nonfinite(monkeypatch):
+    import der.solvers.implicit as implicit_module
+
+    original = implicit_module.evaluate_system
+    calls = {"n": 0}
+
+    def failing(system, state, order):
+        if order == 0:          # the line search's energy, after the first steps
+            calls["n"] += 1
+            if calls["n"] == 2:
+                raise ZeroDivisionError("division by zero")
+        return original(system, state, order)
+
+    monkeypatch.setattr(implicit_module, "evaluate_system", failing)
+    res = solve_quiet(cantilever(20, [0, 0, 0.5]), newton_first=False)
+    assert res.status == "nonfinite" and not res.converged
+    assert "ZeroDivisionError" in res.message and "last finite state kept" in res.message
+    assert np.isfinite(res.state.q).all()
+
+
 # -- 4. a trivial problem: progress judged on a scale that exists ------------------------------------------------
 
 @pytest.mark.parametrize("n", [100, 150, 400])

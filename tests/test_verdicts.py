@@ -106,7 +106,7 @@ def test_floor_verdict_refuses_a_floor_bound_above_one():
 @pytest.mark.parametrize("EA", [1e6, None])
 def test_net_force_on_an_unconstrained_rod_is_refused(EA):
     rod = der.rod_from_shape(shapes.straight(1.0, 10), 1.0, 1.0, EA=EA)
-    with pytest.raises(ValueError, match=r"net applied force \(1\.1+, 0, 0\) on an unconstrained rod: no static "
+    with pytest.raises(ValueError, match=r"net applied force \(1, 0, 0\) on an unconstrained rod: no static "
                                          "equilibrium exists"):
         der.solve(der.Scene(rod, loads=[der.distributed_force([1, 0, 0])]))
 

@@ -419,8 +419,8 @@ def check_equilibrium_exists(system, state):
         if isinstance(load, (PointForce, EndForce)):
             f = np.asarray(load.force, float)
         elif isinstance(load, DistributedForce):
-            # the total the rod receives: the density times the sum of the nodes' Voronoi lengths
-            f = np.asarray(load.density, float) * float(rod.l_bar.sum())
+            # the total the rod receives: the density times the length its nodes stand for (make_plan's lumping)
+            f = np.asarray(load.density, float) * float(rod.node_weights().sum())
         else:
             if isinstance(load, EndTorque) and not load.follower:
                 net_torque += np.asarray(load.torque, float)

@@ -11,9 +11,10 @@ at the interior vertices (edge values averaged onto vertices), with ``xi`` the r
 * ``omega``: geometric torsion, the rotation of the discrete Frenet frame about t from edge to edge (the
   Frenet frame's own reference twist) divided by D. The material twist is then exactly
   ``(alpha_f - alpha_e) / D + omega``, the discrete form of ``alpha' + omega``.
-* ``M``: the discrete constitutive law, ``A1 [(kappa1 - kappa1_bar) m2 - (kappa2 - kappa2_bar) m1] / D +
-  A2 (m - m_bar) / D t`` with frame vectors averaged over the two edges; components (M_n, M_b, M_t) in the
-  vertex Frenet frame. This is paper Eq. 28 in the continuum limit.
+* ``M``: the discrete constitutive law of the energy, ``A1 [(kappa1 - kappa1_bar) m2 - (kappa2 - kappa2_bar) m1]
+  / D + A2 (m - m_bar) / D t`` with the bending part evaluated in each edge's own frame (as the bending energy
+  does) and averaged over the two edges; components (M_n, M_b, M_t) in the vertex Frenet frame. This is paper
+  Eq. 28 in the continuum limit.
 * ``F``: the force transmitted across each edge by the part beyond it (paper's convention: at a free end F
   equals the applied end force), ``F_j = sum over energy terms of dE/de_j`` -- exact for the discrete rod,
   in equilibrium or not. In ``profile`` it is averaged onto vertices (at the two vertices next to the end
@@ -23,7 +24,7 @@ at the interior vertices (edge values averaged onto vertices), with ``xi`` the r
 import numpy as np
 from numba import njit
 
-from .energies.bend import _bend_local, material_curvature
+from .energies.bend import _bend_local, material_curvatures
 from .energies.stretch import _stretch_local, elongations
 from .energies.twist import _twist_local, material_twist
 from .geometry import (
@@ -168,18 +169,21 @@ def internal_moments(rod, state):
     e, f = rod.vertex_edges[:, 0], rod.vertex_edges[:, 1]
     ed = edge_frames(state.q, rod.edge_nodes, state.d1)
     weld = rod.weld
-    k = np.array([material_curvature(ed, rod.vertex_edges, weld, v) for v in range(rod.n_vertices)]).reshape(-1, 2)
+    # the bending energy's own curvatures, per edge frame (energies.bend)
+    k = np.array([material_curvatures(ed, rod.vertex_edges, weld, v) for v in range(rod.n_vertices)]).reshape(-1, 2, 2)
+    r = k - rod.natural_curvature_edges()
     m = np.array([material_twist(state.q, rod.vertex_edges, state.reference_twist, weld, v)
                   for v in range(rod.n_vertices)])
     c, s = np.cos(weld)[:, None], np.sin(weld)[:, None]
-    a1 = m1[e] + c * m1[f] + s * m2[f]     # edge f's frame turned by the weld, as in the bending energy
-    a2 = m2[e] + c * m2[f] - s * m1[f]
-    for a in (a1, a2):
-        a -= np.einsum("ij,ij->i", a, tv)[:, None] * tv
-        a /= np.linalg.norm(a, axis=1)[:, None]
+    m1f = c * m1[f] + s * m2[f]     # edge f's frame turned by the weld, as in the bending energy
+    m2f = c * m2[f] - s * m1[f]
+    # each edge side's moment A1 [(k1 - k1_bar) m2 - (k2 - k2_bar) m1] / D in its own frame, averaged (the two
+    # sides share the cell); its small component along the vertex tangent is dropped: the bending moment is
+    # transverse, the twisting moment is the one along t
+    Mb = 0.5 * ((r[:, 0, :1] * m2[e] - r[:, 0, 1:] * m1[e]) + (r[:, 1, :1] * m2f - r[:, 1, 1:] * m1f))
+    Mb -= np.einsum("ij,ij->i", Mb, tv)[:, None] * tv
     D = rod.voronoi[:, None]
-    return (rod.A1 * ((k[:, :1] - rod.kappa_bar[:, :1]) * a2 - (k[:, 1:] - rod.kappa_bar[:, 1:]) * a1) / D
-            + rod.A2 * (m - rod.twist_bar)[:, None] / D * tv)
+    return rod.A1 * Mb / D + rod.A2 * (m - rod.twist_bar)[:, None] / D * tv
 
 
 def vertex_frenet(rod, state, min_curvature=1e-8):
@@ -216,11 +220,13 @@ def _edge_forces(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_e
         m2 = 0.0
         if has_bend:
             s = A1 / voronoi[v]
-            e = _bend_local(ed, vertex_edges, weld, v, kappa_bar[v, 0], kappa_bar[v, 1], s, 1, g8, H8, work)
+            e = _bend_local(ed, vertex_edges, weld, v, kappa_bar[v], s, s, 1, g8, H8, work)
             for i in range(3):
                 F[a, i] += g8[i]
                 F[b, i] += g8[3 + i]
-            m2 += 2.0 * e * s   # |bending moment|^2 = (A1/D)^2 |kappa - kappa_bar|^2 = 2 E_v A1/D
+            # |bending moment|^2 <= (A1/D)^2 mean_j |kappa^j - kappa_bar^j|^2 = 2 E_v A1/D (equal when the
+            # two edge sides agree)
+            m2 += 2.0 * e * s
         if has_twist:
             s = A2 / voronoi[v]
             e = _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v], s, 1, g8, H8, work)
@@ -245,7 +251,7 @@ def internal_forces(rod, state, k_stretch=None, energies=("stretch", "bend", "tw
             k_stretch = np.zeros(rod.n_edges) if rod.inextensible else rod.EA / rod.l_bar
     lam = state.lam if state.lam.size == rod.n_edges else np.zeros(rod.n_edges)
     return _edge_forces(state.q, state.d1, state.reference_twist, lam, rod.edge_nodes, rod.vertex_nodes,
-                        rod.vertex_edges, rod.l_bar, np.asarray(k_stretch, float), rod.kappa_bar, rod.twist_bar,
+                        rod.vertex_edges, rod.l_bar, np.asarray(k_stretch, float), rod.natural_curvature_edges(), rod.twist_bar,
                         rod.weld, rod.voronoi, rod.A1, rod.A2, "stretch" in energies, "bend" in energies,
                         "twist" in energies)[0]
 

@@ -9,8 +9,9 @@ at the interior vertices (edge values averaged onto vertices), with ``xi`` the r
   binormal of an edge is the average of the curvature binormals of its two vertices; alpha is NaN where
   that average is below ``min_curvature`` (the Frenet frame is undefined there; never a made-up 0).
 * ``omega``: geometric torsion, the rotation of the discrete Frenet frame about t from edge to edge (the
-  Frenet frame's own reference twist) divided by D. The material twist is then exactly
-  ``(alpha_f - alpha_e) / D + omega``, the discrete form of ``alpha' + omega``.
+  Frenet frame's own reference twist) divided by D. At interior vertices the material twist is then exactly
+  ``(alpha_f - alpha_e) / D + omega``, the discrete form of ``alpha' + omega``. At the two vertices next to
+  the ends of an open rod that difference would be one-sided; omega is extrapolated there (see ``torsion``).
 * ``M``: the discrete constitutive law of the energy, ``A1 [(kappa1 - kappa1_bar) m2 - (kappa2 - kappa2_bar) m1]
   / D + A2 (m - m_bar) / D t`` with the bending part evaluated in each edge's own frame (as the bending energy
   does) and averaged over the two edges; components (M_n, M_b, M_t) in the vertex Frenet frame. This is paper
@@ -67,7 +68,16 @@ def alpha(rod, state, min_curvature=1e-8):
 
 
 def torsion(rod, state, min_curvature=1e-8):
-    """Geometric torsion omega at each vertex (1/length); NaN where the Frenet frame is undefined."""
+    """Geometric torsion omega at each vertex (1/length); NaN where the Frenet frame is undefined.
+
+    Interior vertices: the rotation about t of the discrete Frenet frame from edge e to edge f over D, a
+    central difference (second order). An end edge of an open rod has one vertex only, so its Frenet frame
+    sits at that vertex rather than half an edge further out, and the same difference at the vertex next to
+    an end would span half a step (about half the torsion, first order). There omega is instead extrapolated
+    linearly in arc length from the two nearest interior vertices (second order; NaN if either is undefined
+    or the rod has fewer than four vertices). The identity material twist = (alpha_f - alpha_e) / D + omega
+    holds exactly at the interior vertices only.
+    """
     from .geometry import reference_twist_angle
 
     n, t = frenet_normals(rod, state, min_curvature)
@@ -75,6 +85,14 @@ def torsion(rod, state, min_curvature=1e-8):
     for v, (a, b) in enumerate(rod.vertex_edges):
         if np.isfinite(n[a, 0]) and np.isfinite(n[b, 0]):
             out[v] = reference_twist_angle(t[a], n[a], t[b], n[b]) / rod.voronoi[v]
+    if not rod.closed:
+        nv = rod.n_vertices
+        xi = rod.xi_nodes[rod.vertex_nodes[:, 1]]
+        for end, (i1, i2) in ((0, (1, 2)), (nv - 1, (nv - 2, nv - 3))):
+            if nv >= 4:
+                out[end] = out[i1] + (out[i1] - out[i2]) * (xi[end] - xi[i1]) / (xi[i1] - xi[i2])
+            else:
+                out[end] = np.nan
     return out
 
 

@@ -188,7 +188,8 @@ def internal_moments(rod, state):
     ed = edge_frames(state.q, rod.edge_nodes, state.d1)
     weld = rod.weld
     # the bending energy's own curvatures, per edge frame (energies.bend)
-    k = np.array([material_curvatures(ed, rod.vertex_edges, weld, v) for v in range(rod.n_vertices)]).reshape(-1, 2, 2)
+    k = np.array([material_curvatures(ed, rod.vertex_edges, weld, v)
+                  for v in range(rod.n_vertices)]).reshape(-1, 2, 2)
     r = k - rod.natural_curvature_edges()
     m = np.array([material_twist(state.q, rod.vertex_edges, state.reference_twist, weld, v)
                   for v in range(rod.n_vertices)])
@@ -238,7 +239,7 @@ def _edge_forces(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_e
         m2 = 0.0
         if has_bend:
             s = A1 / voronoi[v]
-            e = _bend_local(ed, vertex_edges, weld, v, kappa_bar[v], s, s, 1, g8, H8, work)
+            e = _bend_local(ed, vertex_edges, weld, v, kappa_bar, s, s, 1, g8, H8, work)
             for i in range(3):
                 F[a, i] += g8[i]
                 F[b, i] += g8[3 + i]
@@ -268,8 +269,9 @@ def internal_forces(rod, state, k_stretch=None, energies=("stretch", "bend", "tw
         else:
             k_stretch = np.zeros(rod.n_edges) if rod.inextensible else rod.EA / rod.l_bar
     lam = state.lam if state.lam.size == rod.n_edges else np.zeros(rod.n_edges)
+    kappa_bar = rod.natural_curvature_edges().reshape(-1, 4)
     return _edge_forces(state.q, state.d1, state.reference_twist, lam, rod.edge_nodes, rod.vertex_nodes,
-                        rod.vertex_edges, rod.l_bar, np.asarray(k_stretch, float), rod.natural_curvature_edges(), rod.twist_bar,
+                        rod.vertex_edges, rod.l_bar, np.asarray(k_stretch, float), kappa_bar, rod.twist_bar,
                         rod.weld, rod.voronoi, rod.A1, rod.A2, "stretch" in energies, "bend" in energies,
                         "twist" in energies)[0]
 

@@ -57,11 +57,29 @@ def material_curvature(ed, vertex_edges, weld, v):
     return 0.5 * (k1e + k1f), 0.5 * (k2e + k2f)
 
 
+@njit(cache=True, inline="always")
+def _bend_energy_local(ed, vertex_edges, weld, v, kappa_bar, b1, b2):
+    """Energy of vertex v alone (what ``_bend_local`` returns; small enough to be inlined in the energy loop)."""
+    te, _, m1e, m2e = edge_vectors(ed, vertex_edges[v, 0])
+    tf, _, m1f, m2f = edge_vectors(ed, vertex_edges[v, 1])
+    m1f, m2f = welded(m1f, m2f, weld[v])
+    kb = vscale(2.0 / (1.0 + vdot(te, tf)), vcross(te, tf))
+    k1e = vdot(kb, m2e)
+    k2e = -vdot(kb, m1e)
+    k1f = vdot(kb, m2f)
+    k2f = -vdot(kb, m1f)
+    r1e = k1e - kappa_bar[v, 0]
+    r2e = k2e - kappa_bar[v, 1]
+    r1f = k1f - kappa_bar[v, 2]
+    r2f = k2f - kappa_bar[v, 3]
+    return 0.25 * (b1 * (r1e * r1e + r1f * r1f) + b2 * (r2e * r2e + r2f * r2f))
+
+
 @njit(cache=True)
-def _bend_local(ed, vertex_edges, weld, v, kbar, b1, b2, order, g8, H8, work):
+def _bend_local(ed, vertex_edges, weld, v, kappa_bar, b1, b2, order, g8, H8, work):
     """Energy of vertex v; with order >= 1 its gradient in (e, f, theta_e, theta_f), order >= 2 the Hessian.
 
-    ``kbar`` is the (2, 2) natural pair ``[[k1_e, k2_e], [k1_f, k2_f]]`` of the vertex; ``b1``, ``b2`` the
+    ``kappa_bar[v]`` holds the natural ``(k1_e, k2_e, k1_f, k2_f)`` of the vertex; ``b1``, ``b2`` the
     stiffnesses of the two components (A1 / D_v). ``ed`` holds the per-edge tangents, lengths and material
     frames (``geometry.edge_frames``); ``work`` is a (5, 8) scratch buffer (nothing is allocated per vertex).
 
@@ -79,10 +97,10 @@ def _bend_local(ed, vertex_edges, weld, v, kbar, b1, b2, order, g8, H8, work):
     k2e = -vdot(kb, m1e)
     k1f = vdot(kb, m2f)
     k2f = -vdot(kb, m1f)
-    r1e = k1e - kbar[0, 0]
-    r2e = k2e - kbar[0, 1]
-    r1f = k1f - kbar[1, 0]
-    r2f = k2f - kbar[1, 1]
+    r1e = k1e - kappa_bar[v, 0]
+    r2e = k2e - kappa_bar[v, 1]
+    r1f = k1f - kappa_bar[v, 2]
+    r2f = k2f - kappa_bar[v, 3]
     # E = 1/2 sum_c w_c r_c^2 with w = b / 2: the two edge sides share the vertex's Voronoi cell
     w1 = 0.5 * b1
     w2 = 0.5 * b2
@@ -191,15 +209,13 @@ def _bend_local(ed, vertex_edges, weld, v, kbar, b1, b2, order, g8, H8, work):
 
 @njit(cache=True)
 def bend_energy(ed, vertex_edges, weld, kappa_bar, voronoi, A1):
-    """Total bending energy; ``ed = geometry.edge_frames(q, edge_nodes, d1)``, ``kappa_bar`` the
-    (n_vertices, 2, 2) natural curvatures per vertex and edge side (``Rod.kappa_bar_edges``)."""
-    g8 = np.empty(8)
-    H8 = np.empty((8, 8))
-    work = np.empty((5, 8))
+    """Total bending energy; ``ed = geometry.edge_frames(q, edge_nodes, d1)``; ``kappa_bar`` (n_vertices, 4) the
+    natural ``(k1_e, k2_e, k1_f, k2_f)`` of each vertex, ``Rod.natural_curvature_edges().reshape(-1, 4)``
+    (flat rows index faster than a 3-d array in the hot loop)."""
     total = 0.0
     for v in range(vertex_edges.shape[0]):
         b = A1 / voronoi[v]
-        total += _bend_local(ed, vertex_edges, weld, v, kappa_bar[v], b, b, 0, g8, H8, work)
+        total += _bend_energy_local(ed, vertex_edges, weld, v, kappa_bar, b, b)
     return total
 
 
@@ -212,7 +228,7 @@ def bend_gradient(ed, vertex_nodes, vertex_edges, weld, kappa_bar, voronoi, A1, 
     total = 0.0
     for v in range(vertex_edges.shape[0]):
         b = A1 / voronoi[v]
-        total += _bend_local(ed, vertex_edges, weld, v, kappa_bar[v], b, b, 1, g8, H8, work)
+        total += _bend_local(ed, vertex_edges, weld, v, kappa_bar, b, b, 1, g8, H8, work)
         scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
                                 vertex_edges[v, 0], vertex_edges[v, 1], g8)
     return total
@@ -229,7 +245,7 @@ def bend_hessian(ed, vertex_nodes, vertex_edges, weld, kappa_bar, voronoi, A1, g
     total = 0.0
     for v in range(vertex_edges.shape[0]):
         b = A1 / voronoi[v]
-        total += _bend_local(ed, vertex_edges, weld, v, kappa_bar[v], b, b, 2, g8, H8, work)
+        total += _bend_local(ed, vertex_edges, weld, v, kappa_bar, b, b, 2, g8, H8, work)
         scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
                                 vertex_edges[v, 0], vertex_edges[v, 1], g8)
         expand_vertex_hessian(H8, H11)

@@ -173,7 +173,9 @@ class Rod:
         ``kappa_bar=0`` for a naturally straight rod bent into the shape.
 
         ``kappa_bar`` broadcastable to (n_vertices, 2) sets both edge sides of each vertex to it; an array of
-        shape (n_vertices, 2, 2) sets the two sides apart (see ``kappa_bar_edges``)."""
+        shape (n_vertices, 2, 2) sets the two sides apart (see ``kappa_bar_edges``). To rescale the natural
+        curvature of a rest shape that twists between its edges, scale ``kappa_bar_edges`` (``kappa_bar`` holds
+        only the mean of the two sides)."""
         nv = self.kappa_bar.shape[0]
         if kappa_bar is None:
             kb, ke = self.kappa_bar, self.kappa_bar_edges

@@ -9,11 +9,13 @@ at the interior vertices (edge values averaged onto vertices), with ``xi`` the r
   binormal of an edge is the average of the curvature binormals of its two vertices; alpha is NaN where
   that average is below ``min_curvature`` (the Frenet frame is undefined there; never a made-up 0).
 * ``omega``: geometric torsion, the rotation of the discrete Frenet frame about t from edge to edge (the
-  Frenet frame's own reference twist) divided by D. The material twist is then exactly
-  ``(alpha_f - alpha_e) / D + omega``, the discrete form of ``alpha' + omega``.
-* ``M``: the discrete constitutive law, ``A1 [(kappa1 - kappa1_bar) m2 - (kappa2 - kappa2_bar) m1] / D +
-  A2 (m - m_bar) / D t`` with frame vectors averaged over the two edges; components (M_n, M_b, M_t) in the
-  vertex Frenet frame. This is paper Eq. 28 in the continuum limit.
+  Frenet frame's own reference twist) divided by D. At interior vertices the material twist is then exactly
+  ``(alpha_f - alpha_e) / D + omega``, the discrete form of ``alpha' + omega``. At the two vertices next to
+  the ends of an open rod that difference would be one-sided; omega is extrapolated there (see ``torsion``).
+* ``M``: the discrete constitutive law of the energy, ``A1 [(kappa1 - kappa1_bar) m2 - (kappa2 - kappa2_bar) m1]
+  / D + A2 (m - m_bar) / D t`` with the bending part evaluated in each edge's own frame (as the bending energy
+  does) and averaged over the two edges; components (M_n, M_b, M_t) in the vertex Frenet frame. This is paper
+  Eq. 28 in the continuum limit.
 * ``F``: the force transmitted across each edge by the part beyond it (paper's convention: at a free end F
   equals the applied end force), ``F_j = sum over energy terms of dE/de_j`` -- exact for the discrete rod,
   in equilibrium or not. In ``profile`` it is averaged onto vertices (at the two vertices next to the end
@@ -23,7 +25,7 @@ at the interior vertices (edge values averaged onto vertices), with ``xi`` the r
 import numpy as np
 from numba import njit
 
-from .energies.bend import _bend_local, material_curvature
+from .energies.bend import _bend_local, material_curvatures
 from .energies.stretch import _stretch_local, elongations
 from .energies.twist import _twist_local, material_twist
 from .geometry import (
@@ -66,7 +68,16 @@ def alpha(rod, state, min_curvature=1e-8):
 
 
 def torsion(rod, state, min_curvature=1e-8):
-    """Geometric torsion omega at each vertex (1/length); NaN where the Frenet frame is undefined."""
+    """Geometric torsion omega at each vertex (1/length); NaN where the Frenet frame is undefined.
+
+    Interior vertices: the rotation about t of the discrete Frenet frame from edge e to edge f over D, a
+    central difference (second order). An end edge of an open rod has one vertex only, so its Frenet frame
+    sits at that vertex rather than half an edge further out, and the same difference at the vertex next to
+    an end would span half a step (about half the torsion, first order). There omega is instead extrapolated
+    linearly in arc length from the two nearest interior vertices (second order; NaN if either is undefined
+    or the rod has fewer than four vertices). The identity material twist = (alpha_f - alpha_e) / D + omega
+    holds exactly at the interior vertices only.
+    """
     from .geometry import reference_twist_angle
 
     n, t = frenet_normals(rod, state, min_curvature)
@@ -74,6 +85,14 @@ def torsion(rod, state, min_curvature=1e-8):
     for v, (a, b) in enumerate(rod.vertex_edges):
         if np.isfinite(n[a, 0]) and np.isfinite(n[b, 0]):
             out[v] = reference_twist_angle(t[a], n[a], t[b], n[b]) / rod.voronoi[v]
+    if not rod.closed:
+        nv = rod.n_vertices
+        xi = rod.xi_nodes[rod.vertex_nodes[:, 1]]
+        for end, (i1, i2) in ((0, (1, 2)), (nv - 1, (nv - 2, nv - 3))):
+            if nv >= 4:
+                out[end] = out[i1] + (out[i1] - out[i2]) * (xi[end] - xi[i1]) / (xi[i1] - xi[i2])
+            else:
+                out[end] = np.nan
     return out
 
 
@@ -168,18 +187,22 @@ def internal_moments(rod, state):
     e, f = rod.vertex_edges[:, 0], rod.vertex_edges[:, 1]
     ed = edge_frames(state.q, rod.edge_nodes, state.d1)
     weld = rod.weld
-    k = np.array([material_curvature(ed, rod.vertex_edges, weld, v) for v in range(rod.n_vertices)]).reshape(-1, 2)
+    # the bending energy's own curvatures, per edge frame (energies.bend)
+    k = np.array([material_curvatures(ed, rod.vertex_edges, weld, v)
+                  for v in range(rod.n_vertices)]).reshape(-1, 2, 2)
+    r = k - rod.natural_curvature_edges()
     m = np.array([material_twist(state.q, rod.vertex_edges, state.reference_twist, weld, v)
                   for v in range(rod.n_vertices)])
     c, s = np.cos(weld)[:, None], np.sin(weld)[:, None]
-    a1 = m1[e] + c * m1[f] + s * m2[f]     # edge f's frame turned by the weld, as in the bending energy
-    a2 = m2[e] + c * m2[f] - s * m1[f]
-    for a in (a1, a2):
-        a -= np.einsum("ij,ij->i", a, tv)[:, None] * tv
-        a /= np.linalg.norm(a, axis=1)[:, None]
+    m1f = c * m1[f] + s * m2[f]     # edge f's frame turned by the weld, as in the bending energy
+    m2f = c * m2[f] - s * m1[f]
+    # each edge side's moment A1 [(k1 - k1_bar) m2 - (k2 - k2_bar) m1] / D in its own frame, averaged (the two
+    # sides share the cell); its small component along the vertex tangent is dropped: the bending moment is
+    # transverse, the twisting moment is the one along t
+    Mb = 0.5 * ((r[:, 0, :1] * m2[e] - r[:, 0, 1:] * m1[e]) + (r[:, 1, :1] * m2f - r[:, 1, 1:] * m1f))
+    Mb -= np.einsum("ij,ij->i", Mb, tv)[:, None] * tv
     D = rod.voronoi[:, None]
-    return (rod.A1 * ((k[:, :1] - rod.kappa_bar[:, :1]) * a2 - (k[:, 1:] - rod.kappa_bar[:, 1:]) * a1) / D
-            + rod.A2 * (m - rod.twist_bar)[:, None] / D * tv)
+    return rod.A1 * Mb / D + rod.A2 * (m - rod.twist_bar)[:, None] / D * tv
 
 
 def vertex_frenet(rod, state, min_curvature=1e-8):
@@ -216,11 +239,13 @@ def _edge_forces(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_e
         m2 = 0.0
         if has_bend:
             s = A1 / voronoi[v]
-            e = _bend_local(ed, vertex_edges, weld, v, kappa_bar[v, 0], kappa_bar[v, 1], s, 1, g8, H8, work)
+            e = _bend_local(ed, vertex_edges, weld, v, kappa_bar, s, s, 1, g8, H8, work)
             for i in range(3):
                 F[a, i] += g8[i]
                 F[b, i] += g8[3 + i]
-            m2 += 2.0 * e * s   # |bending moment|^2 = (A1/D)^2 |kappa - kappa_bar|^2 = 2 E_v A1/D
+            # |bending moment|^2 <= (A1/D)^2 mean_j |kappa^j - kappa_bar^j|^2 = 2 E_v A1/D (equal when the
+            # two edge sides agree)
+            m2 += 2.0 * e * s
         if has_twist:
             s = A2 / voronoi[v]
             e = _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v], s, 1, g8, H8, work)
@@ -244,8 +269,9 @@ def internal_forces(rod, state, k_stretch=None, energies=("stretch", "bend", "tw
         else:
             k_stretch = np.zeros(rod.n_edges) if rod.inextensible else rod.EA / rod.l_bar
     lam = state.lam if state.lam.size == rod.n_edges else np.zeros(rod.n_edges)
+    kappa_bar = rod.natural_curvature_edges().reshape(-1, 4)
     return _edge_forces(state.q, state.d1, state.reference_twist, lam, rod.edge_nodes, rod.vertex_nodes,
-                        rod.vertex_edges, rod.l_bar, np.asarray(k_stretch, float), rod.kappa_bar, rod.twist_bar,
+                        rod.vertex_edges, rod.l_bar, np.asarray(k_stretch, float), kappa_bar, rod.twist_bar,
                         rod.weld, rod.voronoi, rod.A1, rod.A2, "stretch" in energies, "bend" in energies,
                         "twist" in energies)[0]
 

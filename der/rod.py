@@ -10,7 +10,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .energies.bend import material_curvature
+from .energies.bend import material_curvatures
 from .geometry import (
     curvature_binormals, edge_frames, frenet_directors, parallel_transport, reference_twist_angle, tangents,
 )
@@ -34,7 +34,13 @@ class Rod:
         The three nodes and the two edges (before, after) of each bending/twisting vertex.
     l_bar : (n_edges,) rest edge lengths; voronoi : (n_vertices,) rest Voronoi lengths.
     kappa_bar : (n_vertices, 2)
-        Natural integrated material curvatures (kappa1, kappa2); (kappa0 * D, 0) on a Frenet-aligned rest shape.
+        Natural integrated material curvatures (kappa1, kappa2), the mean of the two edge sides of
+        ``kappa_bar_edges``; (kappa0 * D, 0) on a Frenet-aligned rest shape.
+    kappa_bar_edges : (n_vertices, 2, 2)
+        What the bending energy uses: the natural curvatures of each vertex measured in the material frame of
+        its edge before (``[:, 0]``) and after (``[:, 1]``) it, components (kappa1, kappa2) last (see
+        ``energies.bend``). The two sides differ where the rest shape twists between the edges. ``None``
+        (a Rod built directly) means both sides equal ``kappa_bar``. Set both with ``with_natural``.
     twist_bar : (n_vertices,)
         Natural integrated twist (radians); omega0 * D in the continuum.
     rest_q : (n_dof,) rest state vector; rest_d1 : (n_edges, 3) rest reference (= material) directors;
@@ -64,6 +70,22 @@ class Rod:
     rho_A: float = 1.0
     rho_J: float | None = None
     imposed_twist: float = 0.0
+    kappa_bar_edges: np.ndarray | None = None
+
+    def natural_curvature_edges(self):
+        """The (n_vertices, 2, 2) natural curvatures per edge side the bending energy uses (``kappa_bar_edges``,
+        or ``kappa_bar`` on both sides when it is None). Raises ValueError if ``kappa_bar`` was replaced
+        without ``kappa_bar_edges`` (their means disagree)."""
+        kb = np.asarray(self.kappa_bar, float)
+        if self.kappa_bar_edges is None:
+            return np.ascontiguousarray(np.repeat(kb[:, None, :], 2, axis=1))
+        ke = np.asarray(self.kappa_bar_edges, float)
+        if ke.shape != (kb.shape[0], 2, 2):
+            raise ValueError(f"Rod.kappa_bar_edges must have shape ({kb.shape[0]}, 2, 2); got {ke.shape}")
+        if np.abs(ke.mean(axis=1) - kb).max(initial=0.0) > 1e-12 * max(1.0, np.abs(kb).max(initial=0.0)):
+            raise ValueError("Rod.kappa_bar disagrees with the mean of Rod.kappa_bar_edges (was kappa_bar replaced "
+                             "alone?); set natural curvatures with Rod.with_natural(kappa_bar=...)")
+        return np.ascontiguousarray(ke)
 
     @property
     def weld(self):
@@ -147,15 +169,36 @@ class Rod:
                         np.zeros(self.n_edges))
 
     def with_natural(self, kappa_bar=None, twist_bar=None):
-        """A copy with other natural integrated curvatures (n_vertices, 2) and/or twists (n_vertices,), same
-        shape: e.g. ``kappa_bar=0`` for a naturally straight rod bent into the shape."""
-        kb = self.kappa_bar if kappa_bar is None else np.broadcast_to(np.asarray(kappa_bar, float),
-                                                                     self.kappa_bar.shape).copy()
+        """A copy with other natural integrated curvatures and/or twists (n_vertices,), same shape: e.g.
+        ``kappa_bar=0`` for a naturally straight rod bent into the shape.
+
+        ``kappa_bar`` broadcastable to (n_vertices, 2) sets both edge sides of each vertex to it; an array of
+        shape (n_vertices, 2, 2) sets the two sides apart (see ``kappa_bar_edges``). To rescale the natural
+        curvature of a rest shape that twists between its edges, scale ``kappa_bar_edges`` (``kappa_bar`` holds
+        only the mean of the two sides)."""
+        nv = self.kappa_bar.shape[0]
+        if kappa_bar is None:
+            kb, ke = self.kappa_bar, self.kappa_bar_edges
+        else:
+            arr = np.asarray(kappa_bar, float)
+            if arr.ndim == 3:
+                if arr.shape != (nv, 2, 2):
+                    raise ValueError(f"with_natural: a per-edge-side kappa_bar must have shape ({nv}, 2, 2); "
+                                     f"got {arr.shape}")
+                ke = arr.copy()
+            else:
+                try:
+                    arr = np.broadcast_to(arr, (nv, 2))
+                except ValueError:
+                    raise ValueError(f"with_natural: kappa_bar must broadcast to ({nv}, 2) or have shape ({nv}, 2, 2); "
+                                     f"got {arr.shape}") from None
+                ke = np.repeat(arr[:, None, :], 2, axis=1)
+            kb = ke.mean(axis=1)
         tb = self.twist_bar if twist_bar is None else np.broadcast_to(np.asarray(twist_bar, float),
                                                                      self.twist_bar.shape).copy()
         if not (np.all(np.isfinite(kb)) and np.all(np.isfinite(tb))):
             raise ValueError("natural curvatures and twists must be finite")
-        return replace(self, kappa_bar=kb, twist_bar=tb)
+        return replace(self, kappa_bar=kb, kappa_bar_edges=ke, twist_bar=tb)
 
     def with_imposed_twist(self, twist):
         """A ring whose ends were welded after a rotation by ``twist`` radians about the tangent (extra
@@ -381,11 +424,14 @@ def rod_from_shape(shape, A1, A2, EA=None, rho_A=1.0, rho_J=None):
     rest_twist = np.array([reference_twist_angle(t[a], d1[a], t[b], d1[b]) for a, b in vertex_edges])
     ed = edge_frames(q, edge_nodes, d1)
     no_weld = np.zeros(vertex_nodes.shape[0])
-    kappa_bar = np.array([material_curvature(ed, vertex_edges, no_weld, v)
-                          for v in range(vertex_nodes.shape[0])]).reshape(-1, 2)
+    # natural curvatures in each edge's frame, with the energy's own kernel: the rest state is force-free
+    kappa_bar_edges = np.array([material_curvatures(ed, vertex_edges, no_weld, v)
+                                for v in range(vertex_nodes.shape[0])]).reshape(-1, 2, 2)
+    kappa_bar = kappa_bar_edges.mean(axis=1)
     voronoi = 0.5 * (le[vertex_edges[:, 0]] + le[vertex_edges[:, 1]])
     return Rod(closed=closed, A1=float(A1), A2=float(A2), EA=None if EA is None else float(EA),
                edge_nodes=edge_nodes, vertex_nodes=vertex_nodes, vertex_edges=vertex_edges,
-               l_bar=le, voronoi=voronoi, kappa_bar=kappa_bar, twist_bar=rest_twist.copy(),
+               l_bar=le, voronoi=voronoi, kappa_bar=kappa_bar, kappa_bar_edges=kappa_bar_edges,
+               twist_bar=rest_twist.copy(),
                rest_q=q, rest_d1=d1, rest_twist=rest_twist, rho_A=float(rho_A),
                rho_J=None if rho_J is None else float(rho_J))

@@ -64,7 +64,8 @@ def discrete_energy(curve, n):
     m1 /= np.linalg.norm(m1, axis=1)[:, None]
     ref = np.array([reference_twist_angle(t[e], m1[e], t[f], m1[f]) for e, f in rod.vertex_edges])
     ed = edge_frames(state.q, rod.edge_nodes, m1)
-    return (bend_energy(ed, rod.vertex_edges, rod.weld, rod.kappa_bar, rod.voronoi, A1)
+    kappa_bar = rod.natural_curvature_edges().reshape(-1, 4)
+    return (bend_energy(ed, rod.vertex_edges, rod.weld, kappa_bar, rod.voronoi, A1)
             + twist_energy(state.q, rod.vertex_edges, ref, rod.weld, rod.twist_bar, rod.voronoi, A2))
 
 
@@ -90,8 +91,8 @@ def test_uniform_rotation_of_a_curved_ring_costs_A1_kappa0_squared_one_minus_cos
         rod = der.rod_from_shape(der.shapes.ring(a0, n), A1, A2)
         state = rod.rest_state()
         state.theta[:] += alpha_rot
-        E = bend_energy(edge_frames(state.q, rod.edge_nodes, state.d1), rod.vertex_edges, rod.weld, rod.kappa_bar,
-                        rod.voronoi, A1)
+        E = bend_energy(edge_frames(state.q, rod.edge_nodes, state.d1), rod.vertex_edges, rod.weld,
+                        rod.natural_curvature_edges().reshape(-1, 4), rod.voronoi, A1)
         errors.append(abs(E / rod.length - exact) / exact)
     errors = np.array(errors)
     assert errors[-1] < 1e-3

@@ -171,3 +171,45 @@ def test_natural_curvature_and_twist_of_a_helix():
         assert np.allclose(rod.kappa_bar[5:-5, 0] / D, 1.0, atol=2 * (6.0 / n) ** 2)
         assert np.abs(rod.kappa_bar[5:-5, 1]).max() < 1e-12
         assert np.allclose(rod.twist_bar[5:-5] / D, 0.6, atol=2 * (6.0 / n) ** 2)
+
+
+def _per_edge_cases():
+    """Rods whose two edge sides differ: strong natural twist (1.7 rad per edge), and a helix given random,
+    unequal natural curvatures on the two sides of each vertex."""
+    from test_discretisation import twisted_straight
+
+    rng = np.random.default_rng(11)
+    helix = der.rod_from_shape(der.shapes.helix(1.0, 2.0, 1.0, 9), 1.3, 0.7, EA=40.0)
+    return {
+        "twisted_straight": twisted_straight(1.0, 8, 2.0, 1.3, 0.7),
+        "helix_random_sides": helix.with_natural(kappa_bar=0.3 * rng.standard_normal((helix.n_vertices, 2, 2))),
+    }
+
+
+@pytest.mark.parametrize("case", ["twisted_straight", "helix_random_sides"])
+def test_per_edge_bending_gradient_and_hessian_match_differences(case):
+    rod = _per_edge_cases()[case]
+    rng = np.random.default_rng(12)
+    state = perturbed_state(rod, rng, amplitude=0.1)
+    ev = Evaluator(der.Scene(rod, energies=("bend",)))
+    E, g, _, K = ev(state, 2)
+    assert E > 0
+    free = free_mask(rod)
+    h = 1e-6
+    fd = np.zeros_like(g)
+    for i in np.flatnonzero(free):
+        qp, qm = state.q.copy(), state.q.copy()
+        qp[i] += h
+        qm[i] -= h
+        fd[i] = (ev(moved(rod, state, qp), 0)[0] - ev(moved(rod, state, qm), 0)[0]) / (2 * h)
+    assert _rel(g, fd) < 1e-6
+    H = K - _transport_term(rod, state, g)
+    assert np.abs(H - H.T).max() <= 1e-12 * np.abs(H).max()
+    J = np.zeros_like(K)
+    for i in np.flatnonzero(free):
+        qp, qm = state.q.copy(), state.q.copy()
+        qp[i] += h
+        qm[i] -= h
+        J[:, i] = (ev(moved(rod, state, qp))[1] - ev(moved(rod, state, qm))[1]) / (2 * h)
+    fi = np.flatnonzero(free)
+    assert _rel(K[np.ix_(fi, fi)], J[np.ix_(fi, fi)]) < 1e-6

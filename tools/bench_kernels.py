@@ -4,7 +4,8 @@
 
 For each n (edges) it times one full gradient evaluation (stretch + bend + twist) and one gradient + Hessian
 evaluation (banded), with der's numba kernels and with the NumPy version written below (same formulas,
-vectorised over vertices, scattered with np.add.at), on the same random configuration of a helix. It first
+vectorised over vertices, scattered with np.add.at; its bending Hessian is assembled one curvature component
+at a time, unlike the kernel), on the same random configuration of a helix. It first
 checks that both give the same numbers. Reported: median seconds over ``--repeat`` runs, node-evaluations per
 second and the NumPy/numba ratio. Compilation is excluded (warm-up call first) and reported apart.
 """
@@ -76,23 +77,18 @@ def numpy_evaluate(rod, q, d1, ref_twist, k, lam, hessian, kl, ku, perm):
     chi = (1.0 + _dot(te, tf))[:, None]
     kb = 2.0 * np.cross(te, tf) / chi
     m1e, m2e, m1f, m2f = m1[ie], m2[ie], m1[jf], m2[jf]
-    k1 = 0.5 * _dot(kb, m2e + m2f)
-    k2 = -0.5 * _dot(kb, m1e + m1f)
+    # bending per edge frame: components k_c = kb . u_c with u = m2_e, -m1_e, m2_f, -m1_f (u' = du/dtheta)
     sb = rod.A1 / rod.voronoi
-    r1, r2 = k1 - rod.kappa_bar[:, 0], k2 - rod.kappa_bar[:, 1]
+    kbar = rod.natural_curvature_edges().reshape(-1, 4)
     tt = (te + tf) / chi
-    dd1, dd2 = (m1e + m1f) / chi, (m2e + m2f) / chi
-    a1, a2 = np.cross(tf, dd2), np.cross(te, dd2)
-    b1, b2 = np.cross(tf, dd1), np.cross(te, dd1)
-    dk1 = np.zeros((nv, 8))
-    dk2 = np.zeros((nv, 8))
-    dk1[:, 0:3] = (-k1[:, None] * tt + a1) / lE
-    dk1[:, 3:6] = (-k1[:, None] * tt - a2) / lF
-    dk2[:, 0:3] = (-k2[:, None] * tt - b1) / lE
-    dk2[:, 3:6] = (-k2[:, None] * tt + b2) / lF
-    kb_m1e, kb_m1f, kb_m2e, kb_m2f = _dot(kb, m1e), _dot(kb, m1f), _dot(kb, m2e), _dot(kb, m2f)
-    dk1[:, 6], dk1[:, 7] = -0.5 * kb_m1e, -0.5 * kb_m1f
-    dk2[:, 6], dk2[:, 7] = -0.5 * kb_m2e, -0.5 * kb_m2f
+    comps = []
+    for c, (u, up, own) in enumerate(((m2e, -m1e, 6), (-m1e, -m2e, 6), (m2f, -m1f, 7), (-m1f, -m2f, 7))):
+        kc = _dot(kb, u)
+        dk = np.zeros((nv, 8))
+        dk[:, 0:3] = (-kc[:, None] * tt + 2.0 * np.cross(tf, u) / chi) / lE
+        dk[:, 3:6] = (-kc[:, None] * tt - 2.0 * np.cross(te, u) / chi) / lF
+        dk[:, own] = _dot(kb, up)
+        comps.append((kc, u, up, own, dk, 0.5 * sb, kc - kbar[:, c]))   # weight A1 / (2 D): two sides per cell
     # twist
     st = rod.A2 / rod.voronoi
     mt = theta[jf] - theta[ie] + ref_twist
@@ -101,7 +97,7 @@ def numpy_evaluate(rod, q, d1, ref_twist, k, lam, hessian, kl, ku, perm):
     dm[:, 0:3] = 0.5 * kb / lE
     dm[:, 3:6] = 0.5 * kb / lF
     dm[:, 6], dm[:, 7] = -1.0, 1.0
-    g8 = (sb * r1)[:, None] * dk1 + (sb * r2)[:, None] * dk2 + (st * rt)[:, None] * dm
+    g8 = sum((w * r)[:, None] * dk for _, _, _, _, dk, w, r in comps) + (st * rt)[:, None] * dm
     g11 = g8 @ _B
     dofs = np.concatenate([4 * vn[:, :1] + np.arange(3), 4 * ie[:, None] + 3, 4 * vn[:, 1:2] + np.arange(3),
                            4 * jf[:, None] + 3, 4 * vn[:, 2:3] + np.arange(3)], axis=1)
@@ -109,44 +105,41 @@ def numpy_evaluate(rod, q, d1, ref_twist, k, lam, hessian, kl, ku, perm):
     np.add.at(flat, dofs.ravel(), g11.ravel())
     if not hessian:
         return flat, None
-    # Hessian: Gauss-Newton part + curvature of kappa1, kappa2 and of the twist
-    H = (sb[:, None, None] * (_outer(dk1, dk1) + _outer(dk2, dk2)) + st[:, None, None] * _outer(dm, dm))
-    s1, s2, s3 = (sb * r1)[:, None, None], (sb * r2)[:, None, None], (st * rt)[:, None, None]
+    # Hessian: Gauss-Newton part + curvature of each bending component (one at a time) and of the twist
+    H = st[:, None, None] * _outer(dm, dm)
+    s3 = (st * rt)[:, None, None]
     I3 = np.eye(3)[None]
-    k1_, k2_ = k1[:, None, None], k2[:, None, None]
     chi_, lE_, lF_ = chi[:, :, None], lE[:, :, None], lF[:, :, None]
-    tete, tftf, tttt = _outer(te, te), _outer(tf, tf), _outer(tt, tt)
-    ee = (s1 * (2 * k1_ * tttt / lE_ ** 2 - _sym(a1, tt) / lE_ ** 2 - k1_ / (chi_ * lE_ ** 2) * (I3 - tete)
-                + _sym(kb, m2e) / (4 * lE_ ** 2))
-          + s2 * (2 * k2_ * tttt / lE_ ** 2 + _sym(b1, tt) / lE_ ** 2 - k2_ / (chi_ * lE_ ** 2) * (I3 - tete)
-                  - _sym(kb, m1e) / (4 * lE_ ** 2))
-          - s3 * _sym(kb, te + tt) / (4 * lE_ ** 2))
-    ff = (s1 * (2 * k1_ * tttt / lF_ ** 2 + _sym(a2, tt) / lF_ ** 2 - k1_ / (chi_ * lF_ ** 2) * (I3 - tftf)
-                + _sym(kb, m2f) / (4 * lF_ ** 2))
-          + s2 * (2 * k2_ * tttt / lF_ ** 2 - _sym(b2, tt) / lF_ ** 2 - k2_ / (chi_ * lF_ ** 2) * (I3 - tftf)
-                  - _sym(kb, m1f) / (4 * lF_ ** 2))
-          - s3 * _sym(kb, tf + tt) / (4 * lF_ ** 2))
     lelf = lE_ * lF_
-    ef = (-(s1 * k1_ + s2 * k2_) / (chi_ * lelf) * (I3 + _outer(te, tf)) + 2 * (s1 * k1_ + s2 * k2_) * tttt / lelf
-          + s1 * (-_outer(a1, tt) + _outer(tt, a2) - _crossmat(dd2)) / lelf
-          + s2 * (_outer(b1, tt) - _outer(tt, b2) + _crossmat(dd1)) / lelf
-          + s3 * (_crossmat(te) / chi_ - 0.5 * _outer(kb, tt)) / lelf)
-    H[:, 0:3, 0:3] += ee
-    H[:, 3:6, 3:6] += ff
-    H[:, 0:3, 3:6] += ef
-    H[:, 3:6, 0:3] += np.transpose(ef, (0, 2, 1))
-    H[:, 6, 6] += s1[:, 0, 0] * (-0.5 * kb_m2e) + s2[:, 0, 0] * (0.5 * kb_m1e)
-    H[:, 7, 7] += s1[:, 0, 0] * (-0.5 * kb_m2f) + s2[:, 0, 0] * (0.5 * kb_m1f)
-    cols = []
-    for s_, m_, kbm in ((s1, m1e, kb_m1e), (s1, m1f, kb_m1f), (s2, m2e, kb_m2e), (s2, m2f, kb_m2f)):
-        ce = s_[:, :, 0] / lE * (0.5 * kbm[:, None] * tt - np.cross(tf, m_) / chi)
-        cf = s_[:, :, 0] / lF * (0.5 * kbm[:, None] * tt + np.cross(te, m_) / chi)
-        cols.append((ce, cf))
-    for (ce, cf), col in zip(cols, (6, 7, 6, 7)):
-        H[:, 0:3, col] += ce
-        H[:, col, 0:3] += ce
-        H[:, 3:6, col] += cf
-        H[:, col, 3:6] += cf
+    tete, tftf, tttt = _outer(te, te), _outer(tf, tf), _outer(tt, tt)
+    for kc, u, up, own, dk, w, r in comps:
+        H += w[:, None, None] * _outer(dk, dk)
+        sc = (w * r)[:, None, None]
+        k_ = kc[:, None, None]
+        dd = 2.0 * u / chi
+        frame = _sym(kb, u) / 2.0
+        H[:, 0:3, 0:3] += sc * (2 * k_ * tttt / lE_ ** 2 - _sym(np.cross(tf, dd), tt) / lE_ ** 2
+                                - k_ / (chi_ * lE_ ** 2) * (I3 - tete) + (own == 6) * frame / lE_ ** 2)
+        H[:, 3:6, 3:6] += sc * (2 * k_ * tttt / lF_ ** 2 + _sym(np.cross(te, dd), tt) / lF_ ** 2
+                                - k_ / (chi_ * lF_ ** 2) * (I3 - tftf) + (own == 7) * frame / lF_ ** 2)
+        ef = sc * (-k_ / (chi_ * lelf) * (I3 + _outer(te, tf)) + 2 * k_ * tttt / lelf
+                   + (-_outer(np.cross(tf, dd), tt) + _outer(tt, np.cross(te, dd)) - _crossmat(dd)) / lelf)
+        H[:, 0:3, 3:6] += ef
+        H[:, 3:6, 0:3] += np.transpose(ef, (0, 2, 1))
+        H[:, own, own] += sc[:, 0, 0] * (-kc)
+        kbu = _dot(kb, up)[:, None]
+        ce = sc[:, :, 0] / lE * (-kbu * tt + 2.0 * np.cross(tf, up) / chi)
+        cf = sc[:, :, 0] / lF * (-kbu * tt - 2.0 * np.cross(te, up) / chi)
+        H[:, 0:3, own] += ce
+        H[:, own, 0:3] += ce
+        H[:, 3:6, own] += cf
+        H[:, own, 3:6] += cf
+    # twist curvature terms
+    H[:, 0:3, 0:3] += -s3 * _sym(kb, te + tt) / (4 * lE_ ** 2)
+    H[:, 3:6, 3:6] += -s3 * _sym(kb, tf + tt) / (4 * lF_ ** 2)
+    eft = s3 * (_crossmat(te) / chi_ - 0.5 * _outer(kb, tt)) / lelf
+    H[:, 0:3, 3:6] += eft
+    H[:, 3:6, 0:3] += np.transpose(eft, (0, 2, 1))
     H11 = np.einsum("ai,nab,bj->nij", _B, H, _B)
     # stretch Hessian blocks
     cT = (tension / le)[:, None, None]

@@ -1,16 +1,25 @@
-"""Isotropic bending with natural curvature (bending stiffness A1).
+"""Isotropic bending with natural curvature (bending stiffness A1), material curvatures per edge frame.
 
-Per vertex ``v`` joining edges ``e`` and ``f`` (Bergou et al. 2010; material frames averaged over both edges):
+Per vertex ``v`` joining edges ``e`` and ``f`` (Bergou et al. 2008, Sec. 4.2), with ``j`` either edge:
 
-    kb     = 2 t_e x t_f / (1 + t_e . t_f)                 curvature binormal, |kb| = 2 tan(phi/2)
-    kappa1 = 1/2 kb . (m2_e + m2_f),  kappa2 = -1/2 kb . (m1_e + m1_f)
-    E_v    = A1 / (2 D_v) [(kappa1 - kappa1_bar)^2 + (kappa2 - kappa2_bar)^2]
+    kb        = 2 t_e x t_f / (1 + t_e . t_f)               curvature binormal, |kb| = 2 tan(phi/2)
+    kappa^j   = (kb . m2_j, -kb . m1_j)                      material curvature in edge j's own frame
+    E_v       = A1 / (4 D_v) sum_{j = e, f} |kappa^j - kappa_bar^j|^2
 
-with ``D_v`` the rest Voronoi length (half the two rest edge lengths); at the weld vertex of a welded ring edge
-f's frame is first turned by the weld rotation (see ``energies.twist``). With the rest material frame on the
-Frenet frame, ``kappa_bar = (kappa0 D, 0)`` and, writing ``m1 = cos(alpha) n + sin(alpha) b``, the
-continuum limit is the paper's bending term ``A1/2 (kappa^2 - 2 kappa kappa0 cos(alpha) + kappa0^2)`` (Eq. 17).
-``kappa1, kappa2`` are integrated (dimensionless) curvatures; energies are in units of A1 / length.
+with ``D_v`` the rest Voronoi length (half the two rest edge lengths) and ``kappa_bar^j`` the natural value
+measured in the same frame on the rest shape (``Rod.kappa_bar_edges``). Each edge's frame enters alone: a
+material twist between the two edges does not shorten the curvature vector (an average of the two frames
+would, by cos(twist / 2), and soften the bending of a naturally twisted rod by cos^2). At the weld vertex of a
+welded ring edge f's frame is first turned by the weld rotation (see ``energies.twist``).
+
+With the rest material frame on the Frenet frame, ``kappa_bar^j = (kappa0 D, 0)`` to O(h^2) and, writing
+``m1 = cos(alpha) n + sin(alpha) b``, each side is ``|kappa^j - kappa_bar^j|^2 = D^2 (kappa^2 - 2 kappa kappa0
+cos(alpha) + kappa0^2)``: the two sides sum to twice that, so ``E_v`` is ``D`` times the paper's bending
+density ``A1/2 (kappa^2 - 2 kappa kappa0 cos(alpha) + kappa0^2)`` (Eq. 17). ``kappa^j`` are integrated
+(dimensionless) curvatures; energies are in units of A1 / length.
+
+The local kernel takes the stiffness of each curvature component (``b1``, ``b2`` = A1 / D_v here), so that
+anisotropic bending (A1 != A1') or per-vertex stiffness only changes what the callers pass.
 """
 import numpy as np
 from numba import njit
@@ -31,142 +40,182 @@ def welded(m1, m2, psi):
 
 
 @njit(cache=True)
-def material_curvature(ed, vertex_edges, weld, v):
-    """Integrated material curvatures (kappa1, kappa2) at vertex v; ``ed`` from ``geometry.edge_frames``."""
+def material_curvatures(ed, vertex_edges, weld, v):
+    """Integrated material curvatures at vertex v in the frame of each edge: ``(k1_e, k2_e, k1_f, k2_f)``
+    with ``k1_j = kb . m2_j``, ``k2_j = -kb . m1_j``; ``ed`` from ``geometry.edge_frames``."""
     te, _, m1e, m2e = edge_vectors(ed, vertex_edges[v, 0])
     tf, _, m1f, m2f = edge_vectors(ed, vertex_edges[v, 1])
     m1f, m2f = welded(m1f, m2f, weld[v])
     kb = vscale(2.0 / (1.0 + vdot(te, tf)), vcross(te, tf))
-    return 0.5 * vdot(kb, vadd(m2e, m2f)), -0.5 * vdot(kb, vadd(m1e, m1f))
+    return vdot(kb, m2e), -vdot(kb, m1e), vdot(kb, m2f), -vdot(kb, m1f)
 
 
 @njit(cache=True)
-def _bend_local(ed, vertex_edges, weld, v, kbar1, kbar2, stiff, order, g8, H8, work):
+def material_curvature(ed, vertex_edges, weld, v):
+    """Mean of the two edges' material curvatures (kappa1, kappa2) at vertex v (what ``Rod.kappa_bar`` holds)."""
+    k1e, k2e, k1f, k2f = material_curvatures(ed, vertex_edges, weld, v)
+    return 0.5 * (k1e + k1f), 0.5 * (k2e + k2f)
+
+
+@njit(cache=True, inline="always")
+def _bend_energy_local(ed, vertex_edges, weld, v, kappa_bar, b1, b2):
+    """Energy of vertex v alone (what ``_bend_local`` returns; small enough to be inlined in the energy loop)."""
+    te, _, m1e, m2e = edge_vectors(ed, vertex_edges[v, 0])
+    tf, _, m1f, m2f = edge_vectors(ed, vertex_edges[v, 1])
+    m1f, m2f = welded(m1f, m2f, weld[v])
+    kb = vscale(2.0 / (1.0 + vdot(te, tf)), vcross(te, tf))
+    k1e = vdot(kb, m2e)
+    k2e = -vdot(kb, m1e)
+    k1f = vdot(kb, m2f)
+    k2f = -vdot(kb, m1f)
+    r1e = k1e - kappa_bar[v, 0]
+    r2e = k2e - kappa_bar[v, 1]
+    r1f = k1f - kappa_bar[v, 2]
+    r2f = k2f - kappa_bar[v, 3]
+    return 0.25 * (b1 * (r1e * r1e + r1f * r1f) + b2 * (r2e * r2e + r2f * r2f))
+
+
+@njit(cache=True)
+def _bend_local(ed, vertex_edges, weld, v, kappa_bar, b1, b2, order, g8, H8, work):
     """Energy of vertex v; with order >= 1 its gradient in (e, f, theta_e, theta_f), order >= 2 the Hessian.
 
-    ``ed`` holds the per-edge tangents, lengths and material frames (``geometry.edge_frames``); ``work`` is a
-    (5, 8) scratch buffer, so nothing is allocated per vertex."""
+    ``kappa_bar[v]`` holds the natural ``(k1_e, k2_e, k1_f, k2_f)`` of the vertex; ``b1``, ``b2`` the
+    stiffnesses of the two components (A1 / D_v). ``ed`` holds the per-edge tangents, lengths and material
+    frames (``geometry.edge_frames``); ``work`` is a (5, 8) scratch buffer (nothing is allocated per vertex).
+
+    Every component is ``kb . u`` with ``u`` one material vector of one edge (``m2_e``, ``-m1_e``, ``m2_f``,
+    ``-m1_f``). Its gradient and Hessian are linear in ``u`` apart from the frame terms, so the curvature
+    part of the Hessian, sum_c s_c Hess(kb . u_c), is assembled once from the weighted sums ``K = sum s_c k_c``
+    and ``U = sum s_c u_c`` rather than per component.
+    """
     te, le, m1e, m2e = edge_vectors(ed, vertex_edges[v, 0])
     tf, lf, m1f, m2f = edge_vectors(ed, vertex_edges[v, 1])
     m1f, m2f = welded(m1f, m2f, weld[v])   # d/dtheta_f is unchanged: m1f' = m2f, m2f' = -m1f
     chi = 1.0 + vdot(te, tf)
     kb = vscale(2.0 / chi, vcross(te, tf))
-    k1 = 0.5 * vdot(kb, vadd(m2e, m2f))
-    k2 = -0.5 * vdot(kb, vadd(m1e, m1f))
-    r1 = k1 - kbar1
-    r2 = k2 - kbar2
-    energy = 0.5 * stiff * (r1 * r1 + r2 * r2)
+    k1e = vdot(kb, m2e)
+    k2e = -vdot(kb, m1e)
+    k1f = vdot(kb, m2f)
+    k2f = -vdot(kb, m1f)
+    r1e = k1e - kappa_bar[v, 0]
+    r2e = k2e - kappa_bar[v, 1]
+    r1f = k1f - kappa_bar[v, 2]
+    r2f = k2f - kappa_bar[v, 3]
+    # E = 1/2 sum_c w_c r_c^2 with w = b / 2: the two edge sides share the vertex's Voronoi cell
+    w1 = 0.5 * b1
+    w2 = 0.5 * b2
+    energy = 0.5 * (w1 * (r1e * r1e + r1f * r1f) + w2 * (r2e * r2e + r2f * r2f))
     if order == 0:
         return energy
 
-    tt = vscale(1.0 / chi, vadd(te, tf))
-    dd1 = vscale(1.0 / chi, vadd(m1e, m1f))
-    dd2 = vscale(1.0 / chi, vadd(m2e, m2f))
-    tf_x_dd2 = vcross(tf, dd2)
-    te_x_dd2 = vcross(te, dd2)
-    tf_x_dd1 = vcross(tf, dd1)
-    te_x_dd1 = vcross(te, dd1)
-    # gradients of kappa1, kappa2 with respect to e, f, theta_e, theta_f
-    dk1e = vscale(1.0 / le, vadd(vscale(-k1, tt), tf_x_dd2))
-    dk1f = vscale(1.0 / lf, vsub(vscale(-k1, tt), te_x_dd2))
-    dk2e = vscale(1.0 / le, vsub(vscale(-k2, tt), tf_x_dd1))
-    dk2f = vscale(1.0 / lf, vadd(vscale(-k2, tt), te_x_dd1))
-    kb_m1e = vdot(kb, m1e)
-    kb_m1f = vdot(kb, m1f)
-    kb_m2e = vdot(kb, m2e)
-    kb_m2f = vdot(kb, m2f)
-    dk1 = work[0]
-    dk2 = work[1]
+    s1e = w1 * r1e
+    s2e = w2 * r2e
+    s1f = w1 * r1f
+    s2f = w2 * r2f
+    ichi = 1.0 / chi
+    tt = vscale(ichi, vadd(te, tf))
+    # U = sum_c s_c u_c (edge e and edge f parts) and K = sum_c s_c k_c
+    Ue = vsub(vscale(s1e, m2e), vscale(s2e, m1e))
+    Uf = vsub(vscale(s1f, m2f), vscale(s2f, m1f))
+    K = s1e * k1e + s2e * k2e + s1f * k1f + s2f * k2f
+    dd = vscale(2.0 * ichi, vadd(Ue, Uf))
+    tf_x_dd = vcross(tf, dd)
+    te_x_dd = vcross(te, dd)
+    # d(kb . u)/de = (-(kb . u) tt + 2 tf x u / chi) / |e|, d/df = (-(kb . u) tt - 2 te x u / chi) / |f|
+    # (a material vector of either edge turns with its own tangent only, normal to kb); d k1_j / dtheta_j =
+    # k2_j, d k2_j / dtheta_j = -k1_j
+    ge = vscale(1.0 / le, vadd(vscale(-K, tt), tf_x_dd))
+    gf = vscale(1.0 / lf, vsub(vscale(-K, tt), te_x_dd))
     for i in range(3):
-        dk1[i] = dk1e[i]
-        dk1[3 + i] = dk1f[i]
-        dk2[i] = dk2e[i]
-        dk2[3 + i] = dk2f[i]
-    dk1[6] = -0.5 * kb_m1e
-    dk1[7] = -0.5 * kb_m1f
-    dk2[6] = -0.5 * kb_m2e
-    dk2[7] = -0.5 * kb_m2f
-    for i in range(8):
-        g8[i] = stiff * (r1 * dk1[i] + r2 * dk2[i])
+        g8[i] = ge[i]
+        g8[3 + i] = gf[i]
+    g8[6] = s1e * k2e - s2e * k1e
+    g8[7] = s1f * k2f - s2f * k1f
     if order == 1:
         return energy
 
-    # Gauss-Newton part: stiff (grad k1 grad k1^T + grad k2 grad k2^T)
+    # Gauss-Newton part: sum_c w_c grad k_c grad k_c^T, one component at a time
     for i in range(8):
         for j in range(8):
-            H8[i, j] = stiff * (dk1[i] * dk1[j] + dk2[i] * dk2[j])
-    # curvature part: stiff (r1 Hess k1 + r2 Hess k2)
-    s1 = stiff * r1
-    s2 = stiff * r2
+            H8[i, j] = 0.0
+    dk = work[0]
+    for c in range(4):
+        if c == 0:
+            kc, u, wc, on_e, dth = k1e, m2e, w1, True, k2e
+        elif c == 1:
+            kc, u, wc, on_e, dth = k2e, vscale(-1.0, m1e), w2, True, -k1e
+        elif c == 2:
+            kc, u, wc, on_e, dth = k1f, m2f, w1, False, k2f
+        else:
+            kc, u, wc, on_e, dth = k2f, vscale(-1.0, m1f), w2, False, -k1f
+        a = vscale(-kc, tt)
+        tf_x_u = vscale(2.0 * ichi, vcross(tf, u))
+        te_x_u = vscale(2.0 * ichi, vcross(te, u))
+        for i in range(3):
+            dk[i] = (a[i] + tf_x_u[i]) / le
+            dk[3 + i] = (a[i] - te_x_u[i]) / lf
+        dk[6] = dth if on_e else 0.0
+        dk[7] = 0.0 if on_e else dth
+        for i in range(8):
+            wi = wc * dk[i]
+            for j in range(i, 8):
+                H8[i, j] += wi * dk[j]
+    for i in range(8):
+        for j in range(i):
+            H8[i, j] = H8[j, i]
+    # curvature part: sum_c s_c Hess(kb . u_c), from K, U (dd = 2 U / chi) and the frame terms of each edge
     le2 = le * le
     lf2 = lf * lf
     lelf = le * lf
-    # kappa1, ee block
-    add_outer(H8, 0, 0, s1 * 2.0 * k1 / le2, tt, tt)
-    add_sym_outer(H8, 0, 0, -s1 / le2, tf_x_dd2, tt)
-    add_identity(H8, 0, 0, -s1 * k1 / (chi * le2))
-    add_outer(H8, 0, 0, s1 * k1 / (chi * le2), te, te)
-    add_sym_outer(H8, 0, 0, s1 / (4.0 * le2), kb, m2e)
-    # kappa1, ff block
-    add_outer(H8, 3, 3, s1 * 2.0 * k1 / lf2, tt, tt)
-    add_sym_outer(H8, 3, 3, s1 / lf2, te_x_dd2, tt)
-    add_identity(H8, 3, 3, -s1 * k1 / (chi * lf2))
-    add_outer(H8, 3, 3, s1 * k1 / (chi * lf2), tf, tf)
-    add_sym_outer(H8, 3, 3, s1 / (4.0 * lf2), kb, m2f)
-    # kappa2, ee block
-    add_outer(H8, 0, 0, s2 * 2.0 * k2 / le2, tt, tt)
-    add_sym_outer(H8, 0, 0, s2 / le2, tf_x_dd1, tt)
-    add_identity(H8, 0, 0, -s2 * k2 / (chi * le2))
-    add_outer(H8, 0, 0, s2 * k2 / (chi * le2), te, te)
-    add_sym_outer(H8, 0, 0, -s2 / (4.0 * le2), kb, m1e)
-    # kappa2, ff block
-    add_outer(H8, 3, 3, s2 * 2.0 * k2 / lf2, tt, tt)
-    add_sym_outer(H8, 3, 3, -s2 / lf2, te_x_dd1, tt)
-    add_identity(H8, 3, 3, -s2 * k2 / (chi * lf2))
-    add_outer(H8, 3, 3, s2 * k2 / (chi * lf2), tf, tf)
-    add_sym_outer(H8, 3, 3, -s2 / (4.0 * lf2), kb, m1f)
+    # ee block
+    add_outer(H8, 0, 0, 2.0 * K / le2, tt, tt)
+    add_sym_outer(H8, 0, 0, -1.0 / le2, tf_x_dd, tt)
+    add_identity(H8, 0, 0, -K * ichi / le2)
+    add_outer(H8, 0, 0, K * ichi / le2, te, te)
+    add_sym_outer(H8, 0, 0, 0.5 / le2, kb, Ue)
+    # ff block
+    add_outer(H8, 3, 3, 2.0 * K / lf2, tt, tt)
+    add_sym_outer(H8, 3, 3, 1.0 / lf2, te_x_dd, tt)
+    add_identity(H8, 3, 3, -K * ichi / lf2)
+    add_outer(H8, 3, 3, K * ichi / lf2, tf, tf)
+    add_sym_outer(H8, 3, 3, 0.5 / lf2, kb, Uf)
     # ef block (and its transpose as fe)
     Bef = work[2:5, 0:3]
     Bef[:, :] = 0.0
-    add_identity(Bef, 0, 0, -(s1 * k1 + s2 * k2) / (chi * lelf))
-    add_outer(Bef, 0, 0, -(s1 * k1 + s2 * k2) / (chi * lelf), te, tf)
-    add_outer(Bef, 0, 0, 2.0 * (s1 * k1 + s2 * k2) / lelf, tt, tt)
-    add_outer(Bef, 0, 0, -s1 / lelf, tf_x_dd2, tt)
-    add_outer(Bef, 0, 0, s1 / lelf, tt, te_x_dd2)
-    add_cross_matrix(Bef, 0, 0, -s1 / lelf, dd2)
-    add_outer(Bef, 0, 0, s2 / lelf, tf_x_dd1, tt)
-    add_outer(Bef, 0, 0, -s2 / lelf, tt, te_x_dd1)
-    add_cross_matrix(Bef, 0, 0, s2 / lelf, dd1)
+    add_identity(Bef, 0, 0, -K * ichi / lelf)
+    add_outer(Bef, 0, 0, -K * ichi / lelf, te, tf)
+    add_outer(Bef, 0, 0, 2.0 * K / lelf, tt, tt)
+    add_outer(Bef, 0, 0, -1.0 / lelf, tf_x_dd, tt)
+    add_outer(Bef, 0, 0, 1.0 / lelf, tt, te_x_dd)
+    add_cross_matrix(Bef, 0, 0, -1.0 / lelf, dd)
     for i in range(3):
         for j in range(3):
             H8[i, 3 + j] += Bef[i, j]
             H8[3 + j, i] += Bef[i, j]
-    # theta-theta
-    H8[6, 6] += s1 * (-0.5 * kb_m2e) + s2 * (0.5 * kb_m1e)
-    H8[7, 7] += s1 * (-0.5 * kb_m2f) + s2 * (0.5 * kb_m1f)
-    # edge-theta
-    ichi = 1.0 / chi
-    add_column(H8, 0, 6, s1 / le, vsub(vscale(0.5 * kb_m1e, tt), vscale(ichi, vcross(tf, m1e))))
-    add_column(H8, 0, 7, s1 / le, vsub(vscale(0.5 * kb_m1f, tt), vscale(ichi, vcross(tf, m1f))))
-    add_column(H8, 3, 6, s1 / lf, vadd(vscale(0.5 * kb_m1e, tt), vscale(ichi, vcross(te, m1e))))
-    add_column(H8, 3, 7, s1 / lf, vadd(vscale(0.5 * kb_m1f, tt), vscale(ichi, vcross(te, m1f))))
-    add_column(H8, 0, 6, s2 / le, vsub(vscale(0.5 * kb_m2e, tt), vscale(ichi, vcross(tf, m2e))))
-    add_column(H8, 0, 7, s2 / le, vsub(vscale(0.5 * kb_m2f, tt), vscale(ichi, vcross(tf, m2f))))
-    add_column(H8, 3, 6, s2 / lf, vadd(vscale(0.5 * kb_m2e, tt), vscale(ichi, vcross(te, m2e))))
-    add_column(H8, 3, 7, s2 / lf, vadd(vscale(0.5 * kb_m2f, tt), vscale(ichi, vcross(te, m2f))))
+    # theta-theta: d2 k1_j / dtheta_j^2 = -k1_j, d2 k2_j / dtheta_j^2 = -k2_j
+    H8[6, 6] += -(s1e * k1e + s2e * k2e)
+    H8[7, 7] += -(s1f * k1f + s2f * k2f)
+    # edge-theta: the gradient of kb . V with V = sum_c s_c du_c/dtheta over the components of that edge
+    Ve = vsub(vscale(-s1e, m1e), vscale(s2e, m2e))
+    Vf = vsub(vscale(-s1f, m1f), vscale(s2f, m2f))
+    Pe = vdot(kb, Ve)
+    Pf = vdot(kb, Vf)
+    add_column(H8, 0, 6, 1.0 / le, vadd(vscale(-Pe, tt), vscale(2.0 * ichi, vcross(tf, Ve))))
+    add_column(H8, 3, 6, 1.0 / lf, vsub(vscale(-Pe, tt), vscale(2.0 * ichi, vcross(te, Ve))))
+    add_column(H8, 0, 7, 1.0 / le, vadd(vscale(-Pf, tt), vscale(2.0 * ichi, vcross(tf, Vf))))
+    add_column(H8, 3, 7, 1.0 / lf, vsub(vscale(-Pf, tt), vscale(2.0 * ichi, vcross(te, Vf))))
     return energy
 
 
 @njit(cache=True)
 def bend_energy(ed, vertex_edges, weld, kappa_bar, voronoi, A1):
-    """Total bending energy; ``ed = geometry.edge_frames(q, edge_nodes, d1)``."""
-    g8 = np.empty(8)
-    H8 = np.empty((8, 8))
-    work = np.empty((5, 8))
+    """Total bending energy; ``ed = geometry.edge_frames(q, edge_nodes, d1)``; ``kappa_bar`` (n_vertices, 4) the
+    natural ``(k1_e, k2_e, k1_f, k2_f)`` of each vertex, ``Rod.natural_curvature_edges().reshape(-1, 4)``
+    (flat rows index faster than a 3-d array in the hot loop)."""
     total = 0.0
     for v in range(vertex_edges.shape[0]):
-        total += _bend_local(ed, vertex_edges, weld, v, kappa_bar[v, 0], kappa_bar[v, 1], A1 / voronoi[v], 0, g8, H8,
-                             work)
+        b = A1 / voronoi[v]
+        total += _bend_energy_local(ed, vertex_edges, weld, v, kappa_bar, b, b)
     return total
 
 
@@ -178,8 +227,8 @@ def bend_gradient(ed, vertex_nodes, vertex_edges, weld, kappa_bar, voronoi, A1, 
     work = np.empty((5, 8))
     total = 0.0
     for v in range(vertex_edges.shape[0]):
-        total += _bend_local(ed, vertex_edges, weld, v, kappa_bar[v, 0], kappa_bar[v, 1], A1 / voronoi[v], 1, g8, H8,
-                             work)
+        b = A1 / voronoi[v]
+        total += _bend_local(ed, vertex_edges, weld, v, kappa_bar, b, b, 1, g8, H8, work)
         scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
                                 vertex_edges[v, 0], vertex_edges[v, 1], g8)
     return total
@@ -195,8 +244,8 @@ def bend_hessian(ed, vertex_nodes, vertex_edges, weld, kappa_bar, voronoi, A1, g
     dofs = np.empty(11, dtype=np.int64)
     total = 0.0
     for v in range(vertex_edges.shape[0]):
-        total += _bend_local(ed, vertex_edges, weld, v, kappa_bar[v, 0], kappa_bar[v, 1], A1 / voronoi[v], 2, g8, H8,
-                             work)
+        b = A1 / voronoi[v]
+        total += _bend_local(ed, vertex_edges, weld, v, kappa_bar, b, b, 2, g8, H8, work)
         scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
                                 vertex_edges[v, 0], vertex_edges[v, 1], g8)
         expand_vertex_hessian(H8, H11)

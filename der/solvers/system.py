@@ -155,7 +155,7 @@ def load_scales(system, state):
     """(F_s, M_s): force and moment scales of the residual (see module docstring)."""
     rod, plan = system.rod, system.plan
     F, M = _edge_forces(state.q, state.d1, state.reference_twist, state.lam, rod.edge_nodes, rod.vertex_nodes,
-                        rod.vertex_edges, rod.l_bar, plan.k_stretch, rod.kappa_bar, rod.twist_bar, plan.weld,
+                        rod.vertex_edges, rod.l_bar, plan.k_stretch, plan.kappa_bar, rod.twist_bar, plan.weld,
                         rod.voronoi, rod.A1, rod.A2, plan.has_stretch, plan.has_bend, plan.has_twist)
     f_int = float(row_norms(F).max()) if F.size else 0.0
     m_int = float(M.max()) if M.size else 0.0
@@ -389,7 +389,7 @@ def energy_terms(system, state):
         out["stretch"] = float(stretch_energy(state.q, rod.edge_nodes, rod.l_bar, plan.k_stretch, state.lam))
     if plan.has_bend:
         ed = edge_frames(state.q, rod.edge_nodes, state.d1)
-        out["bend"] = float(bend_energy(ed, rod.vertex_edges, plan.weld, rod.kappa_bar, rod.voronoi, rod.A1))
+        out["bend"] = float(bend_energy(ed, rod.vertex_edges, plan.weld, plan.kappa_bar, rod.voronoi, rod.A1))
     if plan.has_twist:
         out["twist"] = float(twist_energy(state.q, rod.vertex_edges, state.reference_twist, plan.weld, rod.twist_bar,
                                           rod.voronoi, rod.A2))

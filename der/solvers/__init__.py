@@ -1,5 +1,6 @@
 """Solvers: damped dynamics to static equilibrium (implicit by default, explicit as the reference)."""
 import dataclasses
+import os
 import sys
 import time
 
@@ -61,6 +62,9 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
     elif not (np.isfinite(state.q).all() and np.isfinite(state.d1).all() and np.isfinite(state.reference_twist).all()):
         bad = int(np.flatnonzero(~np.isfinite(state.q))[0]) if not np.isfinite(state.q).all() else -1
         raise ValueError(f"the starting state must be finite (entry {bad} of q is {state.q[bad] if bad >= 0 else '?'})")
+    if record is not None and isinstance(record, (str, os.PathLike)):
+        check_record_path(record, "der.solve: record")
+    compile_time = _compile_first()
     system = build_system(scene, options)
     work = prepare_state(system, state)
     recorder = None
@@ -83,6 +87,8 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
             from .stability import stability
 
             stability(system, result, options.n_eigenvalues)
+        result.compile_time = compile_time
+        result.tol = options.tol
         if recorder is not None:
             recorder.log_final(result)
     finally:
@@ -91,6 +97,30 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
     if not result.converged and raise_on_failure:
         raise ConvergenceError(result)
     return result
+
+
+def _compile_first():
+    """On the first solve of a process, compile (or load from numba's cache) every kernel before any clock
+    starts, announcing a compilation on stderr; returns the seconds it took (0 afterwards)."""
+    from ..warmup import is_done, warmup
+
+    return 0.0 if is_done() else warmup()
+
+
+def check_record_path(path, name):
+    """Refuse, before any work, a recording path that cannot be written (ValueError naming ``name``)."""
+    path = os.fspath(path)
+    if not path:
+        raise ValueError(f"{name} must be the path of a .rrd file to write; got an empty string")
+    if os.path.isdir(path):
+        raise ValueError(f"{name}: {path!r} is a directory; give the path of a .rrd file to write")
+    parent = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(parent):
+        raise ValueError(f"{name}: cannot write {path!r}: the folder {parent} does not exist (create it first)")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"{name}: cannot write {path!r}: the folder {parent} is not writable")
+    if os.path.exists(path) and not os.access(path, os.W_OK):
+        raise ValueError(f"{name}: cannot write {path!r}: the file exists and is not writable")
 
 
 def check_stability(scene, state, n_eigenvalues=6):

@@ -42,6 +42,14 @@ class SolverOptions:
     n_eigenvalues : how many of the lowest eigenvalues to report.
     progress : print progress to stderr (None: only for solves longer than 2 s).
     record_every : log every k-th iteration (implicit) or check (explicit) to a recording.
+
+    Example
+    -------
+    >>> import der
+    >>> options = der.SolverOptions(tol=1e-10, max_iterations=100)
+    >>> options
+    SolverOptions(tol=1e-10, max_iterations=100)
+    >>> # result = der.solve(scene, options=options)   # or der.solve(scene, tol=1e-10, max_iterations=100)
     """
 
     tol: float = 1e-8
@@ -88,6 +96,11 @@ class SolverOptions:
         if not 0 < self.armijo < 0.5:
             raise ValueError(f"SolverOptions.armijo must be in (0, 0.5); got {self.armijo!r}")
 
+    def __repr__(self):
+        """Only the fields that differ from the defaults (a valid constructor call)."""
+        changed = [f"{f.name}={getattr(self, f.name)!r}" for f in fields(self) if getattr(self, f.name) != f.default]
+        return f"SolverOptions({', '.join(changed)})"
+
     @property
     def effective_strain_tol(self):
         return self.tol if self.strain_tol is None else self.strain_tol
@@ -121,6 +134,26 @@ class SolveResult:
         complex eigenvalues appear among the lowest (circulatory loads: the undamped rod would flutter).
     energy : energy by term at the final state.
     history : residual after each iteration/check.
+    compile_time : seconds spent compiling (or loading from numba's cache) der's kernels before this solve,
+        on the first solve of a process; never part of ``wall_time``. 0 afterwards.
+    tol : the residual tolerance the solve was asked for.
+
+    ``print(result)`` shows a short summary (``repr``); the arrays are attributes (``result.state``,
+    ``result.eigenvalues``, ``result.history``).
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 20), A1=1.0, A2=1.5)
+    >>> scene = der.Scene(rod, loads=[der.end_torque(1e-3, follower=True)], constraints=[der.clamp("start")])
+    >>> result = der.solve(scene)
+    >>> result.converged, result.status
+    (True, 'converged')
+    >>> print(result)                                         # doctest: +SKIP
+    SolveResult(converged, implicit solver)
+      residual 3.25e-15 <= tol 1e-08 after 1 iteration; wall time 0.000333 s
+      stable: True (min eigenvalue 11.13, flutter)
+      message: residual 3.25e-15 <= tol 1.0e-08
     """
 
     state: object
@@ -143,6 +176,34 @@ class SolveResult:
     dt: float | None = None
     residual_floor: float = float("nan")
     residual_per_length: float = float("nan")
+    compile_time: float = 0.0
+    tol: float = float("nan")
+
+    def __repr__(self):
+        """One short paragraph: status, residual against tol, iterations, times, stability, message."""
+        def num(v, fmt=".3g"):
+            return "nan" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, fmt)
+
+        head = self.status or ("converged" if self.converged else "not converged")
+        if self.converged and head != "converged":
+            head += ", converged"
+        elif not self.converged:
+            head += ", NOT converged"
+        rel = "<=" if self.residual <= self.tol else ">" if self.tol == self.tol else "vs"
+        lines = [f"SolveResult({head}" + (f", {self.solver} solver)" if self.solver else ")"),
+                 f"  residual {num(self.residual, '.2e')} {rel} tol {num(self.tol, '.0e')} after {self.iterations} "
+                 f"iteration{'' if self.iterations == 1 else 's'}; wall time {num(self.wall_time)} s"]
+        stability_time = getattr(self, "stability_time", None)
+        if stability_time:
+            lines[-1] += f", stability {num(stability_time)} s"
+        if self.compile_time:
+            lines[-1] += f" (+{num(self.compile_time)} s compiling, not in wall time)"
+        if self.stable is not None:
+            lines.append(f"  stable: {self.stable} (min eigenvalue {num(self.min_eigenvalue, '.4g')}"
+                         + (", flutter)" if self.flutter else ")"))
+        message = self.message if len(self.message) <= 200 else self.message[:197] + "..."
+        lines.append(f"  message: {message}")
+        return "\n".join(lines)
 
 
 class ConvergenceError(RuntimeError):

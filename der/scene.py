@@ -41,6 +41,19 @@ class Scene:
         ``der.twisting_moment`` records.
     constraints : sequence
         ``der.clamp``, ``der.pin``, ``der.fix_theta`` records.
+
+    Everything is checked here, before any work: an unknown load or constraint, a node out of range, an end
+    load on a ring, conflicting pins raise a ValueError (or TypeError) naming the argument. Loads act in the
+    global frame unless they are follower loads (``end_torque(..., follower=True)``, ``twisting_moment``).
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.helix(kappa0=1.0, omega0=0.6, turns=1, n=50), A1=1.0, A2=1.5)
+    >>> scene = der.Scene(rod, loads=[der.end_force([0, 0, 1e-3])], constraints=[der.clamp("start")])
+    >>> result = der.solve(scene)
+    >>> result.converged
+    True
     """
 
     rod: Rod

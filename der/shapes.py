@@ -11,6 +11,13 @@ ends xi = 0 and xi = L of the rod (see ``Rod.xi_nodes``). A ring of length L has
 Conventions: the arc starts at the origin with tangent e1 and turns towards e2 (binormal e3); the ring is
 centred at the origin in the (e1, e2) plane, traversed counter-clockwise about e3; the helix is paper Eq. 49
 with axis e3, right-handed for omega0 > 0 and left-handed for omega0 < 0.
+
+Example
+-------
+>>> import der
+>>> shape = der.shapes.helix(kappa0=1.0, omega0=0.6, turns=2, n=100)
+>>> shape.positions.shape                  # n + 1 nodes of an open rod
+(101, 3)
 """
 from dataclasses import dataclass
 
@@ -210,7 +217,7 @@ def helix_length(kappa0, omega0, turns):
     Example
     -------
     >>> import der
-    >>> round(der.shapes.helix_length(1.0, 0.0, 1), 6)    # one turn of the unit circle
+    >>> round(float(der.shapes.helix_length(1.0, 0.0, 1)), 6)    # one turn of the unit circle
     6.283185
     """
     return turns * 2 * np.pi / np.hypot(kappa0, omega0)

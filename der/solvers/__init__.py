@@ -46,7 +46,24 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
 
     Returns
     -------
-    SolveResult, with the stability of the equilibrium (``min_eigenvalue``, ``stable``) when converged.
+    SolveResult, with the stability of the equilibrium (``min_eigenvalue``, ``stable``) when converged;
+    ``print(result)`` shows a short summary. ``wall_time`` is the solve alone: the first solve of a process
+    first compiles der's kernels (or loads them from numba's cache), reported apart as ``compile_time``; on a
+    cold cache it prints "compiling der's kernels (first run only, about a minute)" to stderr before it does.
+
+    Raises
+    ------
+    ValueError / TypeError before any work for bad arguments (a state of another rod, an unwritable
+    ``record`` path, ...); ConvergenceError (with ``.result``) when not converged and ``raise_on_failure``.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 20), A1=1.0, A2=1.5)
+    >>> scene = der.Scene(rod, loads=[der.end_torque(1.5e-3, follower=True)], constraints=[der.clamp("start")])
+    >>> result = der.solve(scene, tol=1e-10)
+    >>> result.converged, round(float(der.diagnostics.end_motion(rod, result.state)[1][0]), 9)   # T L / A2
+    (True, 0.001)
     """
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}; got {solver!r}")
@@ -124,8 +141,30 @@ def check_record_path(path, name):
 
 
 def check_stability(scene, state, n_eigenvalues=6):
-    """Stability of ``state`` as an equilibrium of ``scene`` (it need not be one exactly): a SolveResult-like
-    record with ``min_eigenvalue``, ``eigenvalues``, ``stable``, ``flutter`` and ``stability_note``."""
+    """Stability of ``state`` as an equilibrium of ``scene`` (it need not be one exactly).
+
+    Parameters
+    ----------
+    scene : der.Scene
+    state : der.RodState
+        A state of the scene's rod, e.g. a solve's ``result.state``.
+    n_eigenvalues : int
+        How many of the lowest eigenvalues of the constrained stiffness to compute.
+
+    Returns
+    -------
+    A SolveResult-like record with ``min_eigenvalue``, ``eigenvalues`` (squared natural frequencies, rigid-body
+    and symmetry modes removed), ``stable`` (no eigenvalue with a negative real part), ``flutter`` and
+    ``stability_note``.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 20), A1=1.0, A2=1.5)
+    >>> scene = der.Scene(rod, constraints=[der.clamp("start")])
+    >>> der.check_stability(scene, rod.rest_state()).stable
+    True
+    """
     from .stability import stability
 
     system = build_system(scene, SolverOptions())

@@ -207,7 +207,23 @@ class SolveResult:
 
 
 class ConvergenceError(RuntimeError):
-    """Raised when a solve does not converge; ``.result`` holds the SolveResult with the last state."""
+    """Raised by ``der.solve`` when a solve does not converge; ``.result`` holds the SolveResult with the last state.
+
+    Parameters
+    ----------
+    result : SolveResult
+        The unconverged result (``status``, ``residual``, ``message``, and the last finite ``state``).
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 20), A1=1.0, A2=1.5)
+    >>> scene = der.Scene(rod, loads=[der.end_force([1e-3, 0, 0])], constraints=[der.clamp("start")])
+    >>> try:
+    ...     der.solve(scene, max_iterations=1, newton_first=False)
+    ... except der.ConvergenceError as exc:
+    ...     last_state = exc.result.state                    # continue from here, or inspect exc.result
+    """
 
     def __init__(self, result):
         self.result = result

@@ -197,7 +197,7 @@ class SolveResult:
         if stability_time:
             lines[-1] += f", stability {num(stability_time)} s"
         if self.compile_time:
-            lines[-1] += f" (+{num(self.compile_time)} s compiling, not in wall time)"
+            lines[-1] += f" (+{num(self.compile_time)} s compiling or loading the kernels, not in wall time)"
         if self.stable is not None:
             lines.append(f"  stable: {self.stable} (min eigenvalue {num(self.min_eigenvalue, '.4g')}"
                          + (", flutter)" if self.flutter else ")"))

@@ -240,3 +240,11 @@ def test_records_built_by_hand_are_checked_by_the_scene(no_work):
         der.Scene(ROD, loads=[PointForce(2.5, (1.0, 0.0, 0.0))])
     with pytest.raises(TypeError, match=r"der.end_torque: torque .* must be a finite real number; got 'x'"):
         der.Scene(ROD, loads=[EndTorque("end", "x", True)])
+
+
+def test_solve_and_check_stability_refuse_what_is_not_theirs(no_work):
+    with pytest.raises(TypeError, match=r"der.solve: scene must be a der.Scene .*got Rod"):
+        der.solve(ROD)
+    other = der.rod_from_shape(der.shapes.straight(1.0, 12), A1=1.0, A2=1.5)
+    with pytest.raises(ValueError, match=r"der.check_stability: state does not belong to this rod"):
+        der.check_stability(der.Scene(ROD), other.rest_state())

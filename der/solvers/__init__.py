@@ -65,6 +65,11 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
     >>> result.converged, round(float(der.diagnostics.end_motion(rod, result.state)[1][0]), 9)   # T L / A2
     (True, 0.001)
     """
+    from ..scene import Scene
+
+    if not isinstance(scene, Scene):
+        raise TypeError(f"der.solve: scene must be a der.Scene (der.Scene(rod, loads=[...], constraints=[...])); "
+                        f"got {type(scene).__name__}")
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}; got {solver!r}")
     if options is None:
@@ -165,8 +170,10 @@ def check_stability(scene, state, n_eigenvalues=6):
     >>> der.check_stability(scene, rod.rest_state()).stable
     True
     """
+    from ..rod import check_state
     from .stability import stability
 
+    check_state(scene.rod, state, "der.check_stability")
     system = build_system(scene, SolverOptions())
     work = prepare_state(system, state)
     result = SolveResult(state=work, converged=True, status="", residual=float("nan"), iterations=0,

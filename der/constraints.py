@@ -219,7 +219,7 @@ def validate(rod, constraints):
             if c.position is not None:
                 p = _v.vector3(c.position, "der.pin: position")
                 if k in pinned and not np.array_equal(pinned[k], p):
-                    raise ValueError(f"two pins on node {k} with different positions ({pinned[k].tolist()} and "
+                    raise ValueError(f"der.Scene: constraints: two pins on node {k} with different positions ({pinned[k].tolist()} and "
                                      f"{p.tolist()}): a node can be held at one place only; drop one of them")
                 pinned[k] = p
     fixed_dofs(rod, constraints)

@@ -96,7 +96,8 @@ def clamp(end="start", rotation=None, position=None, slide=()):
     if position is not None:
         position = _v.vector3(position, "der.clamp: position")
     if isinstance(slide, (str, bytes)) or slide is None:
-        raise TypeError(f"der.clamp: slide must be an axis 0, 1 or 2 (x, y, z) or a tuple of at most one; got {slide!r}")
+        raise TypeError(f"der.clamp: slide must be an axis 0, 1 or 2 (x, y, z) or a tuple of at most one; "
+                        f"got {slide!r}")
     axes = tuple(_v.integer(a, "der.clamp: slide", "an axis 0, 1 or 2 (x, y, z)")
                  for a in np.atleast_1d(np.asarray(slide, dtype=object)))
     return Clamp(end, rotation, position, axes)
@@ -219,8 +220,9 @@ def validate(rod, constraints):
             if c.position is not None:
                 p = _v.vector3(c.position, "der.pin: position")
                 if k in pinned and not np.array_equal(pinned[k], p):
-                    raise ValueError(f"der.Scene: constraints: two pins on node {k} with different positions ({pinned[k].tolist()} and "
-                                     f"{p.tolist()}): a node can be held at one place only; drop one of them")
+                    raise ValueError(f"der.Scene: constraints: two pins on node {k} with different positions "
+                                     f"({pinned[k].tolist()} and {p.tolist()}): a node can be held at one place "
+                                     "only; drop one of them")
                 pinned[k] = p
     fixed_dofs(rod, constraints)
 

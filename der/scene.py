@@ -105,8 +105,8 @@ def _check_load(rod, load):
     elif isinstance(load, TwistingMoment):
         validate.finite_number(load.density, "der.twisting_moment: density")
     else:
-        raise ValueError(f"der.Scene: loads: unknown load {load!r}; use der.point_force, der.end_force, der.distributed_force, "
-                         "der.end_torque or der.twisting_moment")
+        raise ValueError(f"der.Scene: loads: unknown load {load!r}; use der.point_force, der.end_force, "
+                         "der.distributed_force, der.end_torque or der.twisting_moment")
 
 
 Plan = namedtuple("Plan", [

@@ -13,8 +13,8 @@ import numpy as np
 def _show(value, limit=80):
     """A short description of ``value`` for an error message."""
     if isinstance(value, np.ndarray):
-        text = f"an array of shape {value.shape}" + (f" ({np.array2string(value, threshold=6)})" if value.size <= 6 else "")
-        return text
+        small = f" ({np.array2string(value, threshold=6)})" if value.size <= 6 else ""
+        return f"an array of shape {value.shape}{small}"
     text = repr(value)
     if len(text) > limit:
         text = text[:limit - 3] + "..."
@@ -104,17 +104,6 @@ def finite_array(value, name, shape=None, allowed=None, finite=True):
 def vector3(value, name):
     """A finite 3-vector (float array of shape (3,))."""
     return finite_array(value, name, (3,), "a finite 3-vector [x, y, z]")
-
-
-def one_of(value, name, choices):
-    """``value`` if it is one of ``choices`` (compared with ==, strings and ints only)."""
-    try:
-        ok = any(value == c and type(value) is type(c) for c in choices)
-    except Exception:
-        ok = False
-    if not ok:
-        raise ValueError(f"{name} must be one of {', '.join(repr(c) for c in choices)}; got {_show(value)}")
-    return value
 
 
 def _shape_text(shape):

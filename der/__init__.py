@@ -1,5 +1,19 @@
-"""der: discrete elastic rods with natural curvature and twist (Drozdov & Rabin), compiled with numba."""
-from . import shapes
+"""der: discrete elastic rods with natural curvature and twist (Drozdov & Rabin), compiled with numba.
+
+Build a rod from a shape (``rod_from_shape(shapes.helix(...), A1, A2)``), put it in a ``Scene`` with loads
+(``point_force``, ``end_force``, ``distributed_force``, ``end_torque``, ``twisting_moment``) and constraints
+(``clamp``, ``pin``, ``fix_theta``), relax it with ``solve``; read the paper's variables with ``diagnostics``.
+Every public name has a docstring with units, sign conventions and an example: ``help(der.end_torque)``.
+
+Example
+-------
+>>> import der
+>>> rod = der.rod_from_shape(der.shapes.helix(kappa0=1.0, omega0=0.6, turns=1, n=50), A1=1.0, A2=1.5)
+>>> scene = der.Scene(rod, loads=[der.end_force([0, 0, 1e-3])], constraints=[der.clamp("start")])
+>>> der.solve(scene).converged
+True
+"""
+from . import diagnostics, shapes
 from .constraints import clamp, fix_theta, pin
 from .loads import distributed_force, end_force, end_torque, point_force, twisting_moment
 from .rod import Rod, RodState, rod_from_shape
@@ -10,7 +24,7 @@ from .solvers import (
 from .warmup import warmup
 
 __all__ = [
-    "shapes", "solve", "check_stability", "warmup", "SolverOptions", "SolveResult", "ConvergenceError", "RoundoffFloorWarning", "LockedRodWarning",
-    "Rod", "RodState", "rod_from_shape", "Scene",
+    "shapes", "diagnostics", "solve", "check_stability", "warmup", "SolverOptions", "SolveResult", "ConvergenceError",
+    "RoundoffFloorWarning", "LockedRodWarning", "Rod", "RodState", "rod_from_shape", "Scene",
     "clamp", "pin", "fix_theta", "point_force", "end_force", "distributed_force", "end_torque", "twisting_moment",
 ]

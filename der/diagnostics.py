@@ -21,6 +21,18 @@ at the interior vertices (edge values averaged onto vertices), with ``xi`` the r
   in equilibrium or not. In ``profile`` it is averaged onto vertices (at the two vertices next to the end
   edges of an open rod, which carry the end loads and clamps, the inner edge's value is used) and resolved
   on the vertex Frenet frame (F_t, F_n, F_b).
+
+Every function takes the rod and a state of it (``rod.rest_state()``, ``result.state``); a state of another
+rod is refused. Units: lengths as the rod's, angles in radians, moments in force * length, forces in force.
+
+Example
+-------
+>>> import der
+>>> rod = der.rod_from_shape(der.shapes.arc(1.0, 3.0, 60), A1=1.0, A2=1.5)
+>>> scene = der.Scene(rod, loads=[der.end_torque(1e-3, follower=True)], constraints=[der.clamp("start")])
+>>> state = der.solve(scene).state
+>>> p = der.diagnostics.profile(rod, state)                  # xi, kappa, omega, alpha, Mn, Mb, Mt, Ft, Fn, Fb
+>>> displacement, rotation = der.diagnostics.end_motion(rod, state)   # in the rest end frame (t0, n0, b0)
 """
 import numpy as np
 from numba import njit
@@ -31,7 +43,7 @@ from .energies.twist import _twist_local, material_twist
 from .geometry import (
     curvature_binormals, edge_frames, frenet_directors, material_frames, signed_angle, tangents,
 )
-from .rod import Rod, RodState
+from .rod import Rod, RodState, check_state
 
 
 def _q(state):
@@ -39,14 +51,54 @@ def _q(state):
 
 
 def curvature(rod: Rod, state: RodState):
-    """kappa at each vertex (1/length)."""
+    """Curvature kappa at each vertex (1/length): |kb| / D, |kb| = 2 tan(phi/2) and D the rest Voronoi
+    length (the curvature the bending energy uses).
+
+    Parameters
+    ----------
+    rod : der.Rod
+    state : der.RodState
+        A state of this rod (``rod.rest_state()``, ``result.state``).
+
+    Returns
+    -------
+    (n_vertices,) array; vertex v sits at the rest arc length ``rod.xi_nodes[rod.vertex_nodes[v, 1]]``.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, 1, 100), A1=1.0, A2=1.5)
+    >>> state = rod.rest_state()
+    >>> round(float(der.diagnostics.curvature(rod, state)[10]), 3)   # kappa0 = 1
+    1.0
+    """
     t = tangents(state.q, rod.edge_nodes)
     kb = curvature_binormals(t, rod.vertex_edges)
     return np.linalg.norm(kb, axis=1) / rod.voronoi
 
 
 def frenet_normals(rod, state, min_curvature=1e-8):
-    """Discrete Frenet normal per edge, NaN rows where undefined; also returns tangents."""
+    """Discrete Frenet normal of each edge (NaN rows where the curvature vanishes) and the unit tangents.
+
+    Parameters
+    ----------
+    rod : der.Rod
+    state : der.RodState
+        A state of this rod (``rod.rest_state()``, ``result.state``).
+    min_curvature : float
+        Below this curvature (1/length) the Frenet frame counts as undefined (NaN).
+
+    Returns
+    -------
+    (n, t): two (n_edges, 3) arrays.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, 1, 100), A1=1.0, A2=1.5)
+    >>> state = rod.rest_state()
+    >>> n, t = der.diagnostics.frenet_normals(rod, state)
+    """
     t = tangents(state.q, rod.edge_nodes)
     kb = curvature_binormals(t, rod.vertex_edges)
     # threshold on |kb| ~ kappa * l: scale the curvature threshold by the local edge length
@@ -57,7 +109,30 @@ def frenet_normals(rod, state, min_curvature=1e-8):
 
 
 def alpha(rod, state, min_curvature=1e-8):
-    """Twist angle alpha of each edge (radians): from the Frenet normal to m1 about t; NaN where kappa ~ 0."""
+    """The paper's twist angle alpha of each edge (radians): the signed angle from the discrete Frenet
+    normal n to the material vector m1, right-handed about the tangent t; NaN where kappa ~ 0 (never a
+    made-up 0).
+
+    Parameters
+    ----------
+    rod : der.Rod
+    state : der.RodState
+        A state of this rod (``rod.rest_state()``, ``result.state``).
+    min_curvature : float
+        Below this curvature (1/length) the Frenet frame counts as undefined (NaN).
+
+    Returns
+    -------
+    (n_edges,) array.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, 1, 100), A1=1.0, A2=1.5)
+    >>> state = rod.rest_state()
+    >>> bool(abs(der.diagnostics.alpha(rod, state)).max() < 1e-9)   # the rest frame is the Frenet frame
+    True
+    """
     n, t = frenet_normals(rod, state, min_curvature)
     m1, _ = material_frames(state.q, t, state.d1)
     out = np.full(rod.n_edges, np.nan)
@@ -68,7 +143,8 @@ def alpha(rod, state, min_curvature=1e-8):
 
 
 def torsion(rod, state, min_curvature=1e-8):
-    """Geometric torsion omega at each vertex (1/length); NaN where the Frenet frame is undefined.
+    """Geometric torsion omega at each vertex (1/length); NaN where the Frenet frame is undefined. Positive for
+    a right-handed helix.
 
     Interior vertices: the rotation about t of the discrete Frenet frame from edge e to edge f over D, a
     central difference (second order). An end edge of an open rod has one vertex only, so its Frenet frame
@@ -77,6 +153,26 @@ def torsion(rod, state, min_curvature=1e-8):
     linearly in arc length from the two nearest interior vertices (second order; NaN if either is undefined
     or the rod has fewer than four vertices). The identity material twist = (alpha_f - alpha_e) / D + omega
     holds exactly at the interior vertices only.
+
+    Parameters
+    ----------
+    rod : der.Rod
+    state : der.RodState
+        A state of this rod (``rod.rest_state()``, ``result.state``).
+    min_curvature : float
+        Below this curvature (1/length) the Frenet frame counts as undefined (NaN).
+
+    Returns
+    -------
+    (n_vertices,) array.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, 1, 100), A1=1.0, A2=1.5)
+    >>> state = rod.rest_state()
+    >>> round(float(der.diagnostics.torsion(rod, state)[10]), 3)    # omega0 = 0.6
+    0.6
     """
     from .geometry import reference_twist_angle
 
@@ -97,15 +193,53 @@ def torsion(rod, state, min_curvature=1e-8):
 
 
 def material_twist_density(rod, state):
-    """Material twist per length (alpha' + omega in the continuum) at each vertex (radians/length)."""
+    """Material twist per length at each vertex (radians/length): alpha' + omega in the continuum, the
+    twist the energy's A2 term measures (positive: right-handed about t).
+
+    Parameters
+    ----------
+    rod : der.Rod
+    state : der.RodState
+        A state of this rod (``rod.rest_state()``, ``result.state``).
+
+    Returns
+    -------
+    (n_vertices,) array.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, 1, 100), A1=1.0, A2=1.5)
+    >>> state = rod.rest_state()
+    >>> tw = der.diagnostics.material_twist_density(rod, state)
+    """
     weld = rod.weld
     return np.array([material_twist(state.q, rod.vertex_edges, state.reference_twist, weld, v)
                      for v in range(rod.n_vertices)]) / rod.voronoi
 
 
 def total_twist(rod, state):
-    """Total material twist Tw of the rod (radians): the sum of the integrated twists (a ring's weld rotation
-    included: the twist of the material ribbon the weld closes)."""
+    """Total material twist Tw of the rod (radians): the sum of the integrated twists (a ring's weld
+    rotation included: the twist of the material ribbon the weld closes).
+
+    Parameters
+    ----------
+    rod : der.Rod
+    state : der.RodState
+        A state of this rod (``rod.rest_state()``, ``result.state``).
+
+    Returns
+    -------
+    float, radians (divide by 2 pi for turns).
+
+    Example
+    -------
+    >>> import numpy as np, der
+    >>> ring = der.rod_from_shape(der.shapes.ring(1.0, 60), A1=1.0, A2=1.5).with_imposed_twist(2 * np.pi)
+    >>> state = ring.rest_state()
+    >>> round(der.diagnostics.total_twist(ring, state) / (2 * np.pi), 6)
+    1.0
+    """
     weld = rod.weld
     return float(sum(material_twist(state.q, rod.vertex_edges, state.reference_twist, weld, v)
                      for v in range(rod.n_vertices)))
@@ -156,7 +290,26 @@ def _writhe(x):
 def writhe(rod, state):
     """Writhe Wr of a ring's centreline (turns): the Gauss double integral over the closed polygon of its
     nodes, exact for the polygon (Klenin & Langowski 2000: one solid angle per pair of segments). O(n^2):
-    about 0.1 s at n = 2,000 and 10x that per tripling of n beyond."""
+    about 0.1 s at n = 2,000 and 10x that per tripling of n beyond. ValueError for an open rod.
+
+    Parameters
+    ----------
+    rod : der.Rod
+    state : der.RodState
+        A state of this rod (``rod.rest_state()``, ``result.state``).
+
+    Returns
+    -------
+    float, turns.
+
+    Example
+    -------
+    >>> import numpy as np, der
+    >>> ring = der.rod_from_shape(der.shapes.ring(1.0, 60), A1=1.0, A2=1.5).with_imposed_twist(2 * np.pi)
+    >>> state = ring.rest_state()
+    >>> abs(der.diagnostics.writhe(ring, state)) < 1e-12         # a planar circle
+    True
+    """
     if not rod.closed:
         raise ValueError("writhe: the rod is open; writhe (and the linking number) is defined for a closed ring")
     return float(_writhe(np.ascontiguousarray(_q(state).reshape(-1, 4)[:, :3])))
@@ -165,7 +318,26 @@ def writhe(rod, state):
 def linking_number(rod, state):
     """(Lk, Tw, Wr) of a ring in turns, with Lk = Tw + Wr (Calugareanu-White): Tw the total material twist
     over 2 pi (the weld rotation included), Wr the writhe. For a ring closed with ``imposed_twist`` and no
-    other twist at rest, Lk = imposed_twist / 2 pi, conserved by every smooth deformation."""
+    other twist at rest, Lk = imposed_twist / 2 pi, conserved by every smooth deformation.
+
+    Parameters
+    ----------
+    rod : der.Rod
+    state : der.RodState
+        A state of this rod (``rod.rest_state()``, ``result.state``).
+
+    Returns
+    -------
+    (Lk, Tw, Wr), floats, turns.
+
+    Example
+    -------
+    >>> import numpy as np, der
+    >>> ring = der.rod_from_shape(der.shapes.ring(1.0, 60), A1=1.0, A2=1.5).with_imposed_twist(2 * np.pi)
+    >>> state = ring.rest_state()
+    >>> [round(v, 6) + 0.0 for v in der.diagnostics.linking_number(ring, state)]
+    [1.0, 1.0, 0.0]
+    """
     tw = total_twist(rod, state) / (2.0 * np.pi)
     wr = writhe(rod, state)
     return tw + wr, tw, wr
@@ -182,7 +354,27 @@ def _vertex_frames(rod, state):
 
 
 def internal_moments(rod, state):
-    """Internal moment vectors at the vertices (force * length), shape (n_vertices, 3)."""
+    """Internal moment vectors at the vertices (force * length), global frame: the discrete constitutive
+    law A1 (kappa - kappa_bar) + A2 (twist - twist_bar) t (paper Eq. 28 in the continuum limit).
+
+    Parameters
+    ----------
+    rod : der.Rod
+    state : der.RodState
+        A state of this rod (``rod.rest_state()``, ``result.state``).
+
+    Returns
+    -------
+    (n_vertices, 3) array.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, 1, 100), A1=1.0, A2=1.5)
+    >>> state = rod.rest_state()
+    >>> bool(abs(der.diagnostics.internal_moments(rod, state)).max() < 1e-12)   # rest: no moment
+    True
+    """
     t, m1, m2, tv, kb = _vertex_frames(rod, state)
     e, f = rod.vertex_edges[:, 0], rod.vertex_edges[:, 1]
     ed = edge_frames(state.q, rod.edge_nodes, state.d1)
@@ -206,7 +398,28 @@ def internal_moments(rod, state):
 
 
 def vertex_frenet(rod, state, min_curvature=1e-8):
-    """(t, n, b) at each vertex: t the averaged tangent, b along kb (NaN where kappa ~ 0)."""
+    """Frenet frame (t, n, b) at each vertex: t the averaged tangent, b along the curvature binormal kb,
+    n = b x t (NaN rows where kappa ~ 0).
+
+    Parameters
+    ----------
+    rod : der.Rod
+    state : der.RodState
+        A state of this rod (``rod.rest_state()``, ``result.state``).
+    min_curvature : float
+        Below this curvature (1/length) the Frenet frame counts as undefined (NaN).
+
+    Returns
+    -------
+    (t, n, b): three (n_vertices, 3) arrays.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, 1, 100), A1=1.0, A2=1.5)
+    >>> state = rod.rest_state()
+    >>> t, n, b = der.diagnostics.vertex_frenet(rod, state)
+    """
     t, _, _, tv, kb = _vertex_frames(rod, state)
     lk = np.linalg.norm(kb, axis=1)
     b = kb / np.where(lk > 0, lk, 1.0)[:, None]
@@ -258,10 +471,31 @@ def _edge_forces(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_e
 
 
 def internal_forces(rod, state, k_stretch=None, energies=("stretch", "bend", "twist")):
-    """Internal force across each edge (force units), shape (n_edges, 3): F_j = sum of dE/de_j.
+    """Internal force across each edge (force units), global frame: F_j = sum of dE/de_j over the energy
+    terms (paper's convention: at a free end F equals the applied end force). The tension of an
+    inextensible rod is ``lam + penalty g`` with the multipliers and penalty the solver left in the state;
+    of an extensible rod, EA times the strain.
 
-    The tension of an inextensible rod is ``lam + penalty g`` with the multipliers and penalty the solver left
-    in the state; of an extensible rod, EA times the strain. ``k_stretch`` overrides the penalty.
+    Parameters
+    ----------
+    rod : der.Rod
+    state : der.RodState
+        A state of this rod (``rod.rest_state()``, ``result.state``).
+    k_stretch : (n_edges,) array, optional
+        Axial penalty overriding the state's.
+    energies : tuple of str
+        Which energy terms to include.
+
+    Returns
+    -------
+    (n_edges, 3) array.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, 1, 100), A1=1.0, A2=1.5)
+    >>> state = rod.rest_state()
+    >>> F = der.diagnostics.internal_forces(rod, state)
     """
     if k_stretch is None:
         if state.penalty is not None:
@@ -277,16 +511,61 @@ def internal_forces(rod, state, k_stretch=None, energies=("stretch", "bend", "tw
 
 
 def strain(rod, state):
-    """Axial strain of each edge, (|e| - l) / l."""
+    """Axial strain of each edge, (|e| - l) / l (dimensionless; positive stretched).
+
+    Parameters
+    ----------
+    rod : der.Rod
+    state : der.RodState
+        A state of this rod (``rod.rest_state()``, ``result.state``).
+
+    Returns
+    -------
+    (n_edges,) array.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, 1, 100), A1=1.0, A2=1.5)
+    >>> state = rod.rest_state()
+    >>> bool(abs(der.diagnostics.strain(rod, state)).max() < 1e-12)
+    True
+    """
     return elongations(state.q, rod.edge_nodes, rod.l_bar) / rod.l_bar
 
 
 def profile(rod, state, k_stretch=None, min_curvature=1e-8):
-    """The paper's variables at the vertices, as a dict of equal-length arrays.
+    """The paper's variables at the interior vertices, as a dict of equal-length arrays.
 
-    Keys: xi (rest arc length), kappa, omega, alpha, twist (material twist per length), Mn, Mb, Mt (moment
-    components in the vertex Frenet frame), Ft, Fn, Fb (force components, averaged from the adjacent edges).
+    Keys: xi (rest arc length), kappa (curvature), omega (geometric torsion), alpha (twist angle, edge values
+    averaged), twist (material twist per length), Mn, Mb, Mt (internal moment in the vertex Frenet frame
+    (n, b, t)), Ft, Fn, Fb (internal force, averaged from the adjacent edges, same frame). Lengths in rod units,
+    moments in force * length, forces in force units.
+
+    Parameters
+    ----------
+    rod : der.Rod
+    state : der.RodState
+        A state of this rod (``rod.rest_state()``, ``result.state``).
+    k_stretch : (n_edges,) array, optional
+        Axial penalty overriding the state's (internal_forces).
+    min_curvature : float
+        Below this curvature (1/length) the Frenet frame counts as undefined (NaN).
+
+    Returns
+    -------
+    dict of (n_vertices,) arrays. A state of another rod (other sizes) is refused with a ValueError.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, 1, 100), A1=1.0, A2=1.5)
+    >>> state = rod.rest_state()
+    >>> p = der.diagnostics.profile(rod, state)
+    >>> sorted(p)
+    ['Fb', 'Fn', 'Ft', 'Mb', 'Mn', 'Mt', 'alpha', 'kappa', 'omega', 'twist', 'xi']
     """
+    check_state(rod, state, "der.diagnostics.profile")
     xi = rod.xi_nodes[rod.vertex_nodes[:, 1]]
     tv, nv, bv = vertex_frenet(rod, state, min_curvature)
     M = internal_moments(rod, state)
@@ -315,7 +594,24 @@ def _unwrap_near(a, ref):
 
 
 def rotation_vector(R):
-    """Rotation vector (axis * angle, radians) of a rotation matrix R (the log map), angle in [0, pi]."""
+    """Rotation vector (axis * angle, radians) of a rotation matrix R (the log map), angle in [0, pi].
+
+    Parameters
+    ----------
+    R : (3, 3) array
+        A rotation matrix.
+
+    Returns
+    -------
+    (3,) array, right-handed about its own direction.
+
+    Example
+    -------
+    >>> import numpy as np, der
+    >>> c, s = np.cos(0.3), np.sin(0.3)
+    >>> der.diagnostics.rotation_vector([[c, -s, 0], [s, c, 0], [0, 0, 1]]).round(12) + 0.0
+    array([0. , 0. , 0.3])
+    """
     R = np.asarray(R, float)
     c = np.clip(0.5 * (np.trace(R) - 1.0), -1.0, 1.0)
     angle = np.arccos(c)
@@ -332,7 +628,27 @@ def rotation_vector(R):
 
 
 def end_frame(rod, state, end="end"):
-    """(midpoint, 3x3 frame with rows t, m1, m2) of the end edge: the rod's end cross-section."""
+    """Position and material frame of an end cross-section: the midpoint of the end edge (xi = 0 or L)
+    and the rows t, m1, m2 (global frame; t along increasing arc length).
+
+    Parameters
+    ----------
+    rod : der.Rod
+    state : der.RodState
+        A state of this rod (``rod.rest_state()``, ``result.state``).
+    end : "start" or "end"
+
+    Returns
+    -------
+    (midpoint (3,), frame (3, 3) with rows t, m1, m2).
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, 1, 100), A1=1.0, A2=1.5)
+    >>> state = rod.rest_state()
+    >>> x, frame = der.diagnostics.end_frame(rod, state, "end")
+    """
     j = 0 if end == "start" else rod.n_edges - 1
     x = state.positions
     a, b = rod.edge_nodes[j]
@@ -346,8 +662,36 @@ def end_frame(rod, state, end="end"):
 
 
 def end_motion(rod, state, end="end"):
-    """Displacement and rotation vector of an end cross-section relative to the rest state, both as
-    components in the rest end frame (t0, m1_0, m2_0) -- for a Frenet-aligned rest shape, (t0, n0, b0)."""
+    """Displacement and rotation of an end cross-section relative to the rest state, in the REST END FRAME.
+
+    Both vectors are given as components along (t0, m1_0, m2_0), the rest end frame of that end
+    (``end_frame`` of the rest state) -- for a Frenet-aligned rest shape (``rod_from_shape``), (t0, n0, b0):
+    the tangent, normal and binormal of the rest shape at that end. The displacement is that of the end-edge
+    midpoint (length units); the rotation is the rotation vector (axis * angle, radians, right-handed, angle in
+    [0, pi]) taking the rest end material frame to the current one. So ``rot[0]`` is the turn of the end about
+    its rest tangent.
+
+    Parameters
+    ----------
+    rod : der.Rod
+    state : der.RodState
+        A state of this rod (``rod.rest_state()``, ``result.state``).
+    end : "start" or "end"
+
+    Returns
+    -------
+    (displacement (3,), rotation (3,)) in the rest end frame.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 20), A1=1.0, A2=1.5)
+    >>> scene = der.Scene(rod, loads=[der.end_torque(1.5e-3, follower=True)], constraints=[der.clamp("start")])
+    >>> disp, rot = der.diagnostics.end_motion(rod, der.solve(scene).state)
+    >>> round(float(rot[0]), 9)                                  # T L / A2
+    0.001
+    """
+    check_state(rod, state, "der.diagnostics.end_motion")
     p0, F0 = end_frame(rod, rod.rest_state(), end)
     p, F = end_frame(rod, state, end)
     Q = F.T @ F0                       # maps rest frame vectors to current ones: Q F0[i] = F[i]

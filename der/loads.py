@@ -15,12 +15,15 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from . import validate
 from .stencils import edge_dofs, scatter_band
 
 
 @dataclass(frozen=True)
 class PointForce:
-    """A dead force ``force`` (3-vector, force units) on node ``node`` (negative indices count from the end)."""
+    """A dead force ``force`` (3-vector, force units) on node ``node`` (negative indices count from the end).
+
+    Made by ``der.point_force``."""
     node: int
     force: tuple
 
@@ -30,6 +33,7 @@ class EndForce:
     """A dead force ``force`` (3-vector) on the end cross-section ``end`` ("start" or "end").
 
     It acts at the end edge's midpoint -- the rod's end, xi = 0 or L -- as half the force on each of its nodes.
+    Made by ``der.end_force``.
     """
     end: str
     force: tuple
@@ -37,7 +41,9 @@ class EndForce:
 
 @dataclass(frozen=True)
 class DistributedForce:
-    """A dead force per unit rest length ``density`` (3-vector), lumped to nodes by Voronoi length."""
+    """A dead force per unit rest length ``density`` (3-vector), lumped to nodes by Voronoi length.
+
+    Made by ``der.distributed_force``."""
     density: tuple
 
 
@@ -47,6 +53,7 @@ class EndTorque:
 
     ``follower=False``: a dead torque, ``torque`` a fixed 3-vector (force * length).
     ``follower=True``: ``torque`` a scalar T about the current end tangent (positive over-twists).
+    Made by ``der.end_torque``.
     """
     end: str
     torque: object
@@ -55,30 +62,177 @@ class EndTorque:
 
 @dataclass(frozen=True)
 class TwistingMoment:
-    """A distributed moment ``density`` (force * length / length) about the current tangent (a follower load)."""
+    """A distributed moment ``density`` (force * length / length) about the current tangent (a follower load).
+
+    Made by ``der.twisting_moment``."""
     density: float
 
 
+ENDS = ("start", "end")
+
+
+def check_end(end, name):
+    """``end`` must be "start" or "end" (0 and -1 are accepted as aliases)."""
+    if isinstance(end, str) and end in ENDS:
+        return end
+    if isinstance(end, (int, np.integer)) and not isinstance(end, (bool, np.bool_)) and int(end) in (0, -1):
+        return ENDS[0] if int(end) == 0 else ENDS[1]
+    raise ValueError(f"{name} must be 'start' or 'end'; got {end!r}")
+
+
 def point_force(node, force):
-    return PointForce(int(node), tuple(float(f) for f in force))
+    """A dead force on one node.
+
+    Parameters
+    ----------
+    node : int
+        Node index, 0 ... n_nodes - 1; negative indices count from the end (-1 is the last node). Python or
+        numpy integers, or a float with a whole value (3.0); 2.5 is refused, never rounded. Note that an open
+        rod's first and last nodes lie half an edge outside the rod's ends (``Rod.xi_nodes``): to load an end
+        cross-section use ``der.end_force``.
+    force : 3-vector
+        The force (force units), in the global frame; it keeps its direction as the rod moves (dead load).
+
+    Returns
+    -------
+    PointForce, to pass in ``der.Scene(rod, loads=[...])``.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 10), A1=1.0, A2=1.0)
+    >>> load = der.point_force(5, [1e-3, 0, 0])      # node 5: the middle of the rod
+    >>> scene = der.Scene(rod, loads=[load], constraints=[der.clamp("start")])
+    """
+    return PointForce(validate.integer(node, "der.point_force: node", "an integer node index"),
+                      tuple(validate.vector3(force, "der.point_force: force")))
 
 
 def end_force(force, end="end"):
-    return EndForce(end, tuple(float(f) for f in force))
+    """A dead force on an end cross-section of an open rod.
+
+    Parameters
+    ----------
+    force : 3-vector
+        The force (force units), global frame, fixed in direction (dead load).
+    end : "start" or "end"
+        Which end: xi = 0 or xi = L. The end cross-section is the midpoint of the end edge (the outer node lies
+        half an edge beyond it); the force is applied there, as half the force on each node of the end edge.
+
+    Returns
+    -------
+    EndForce, to pass in ``der.Scene(rod, loads=[...])``.
+
+    Example
+    -------
+    A cantilever clamped at xi = 0 pulled sideways at xi = L:
+
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 20), A1=1.0, A2=1.0)
+    >>> scene = der.Scene(rod, loads=[der.end_force([1e-3, 0, 0])], constraints=[der.clamp("start")])
+    """
+    return EndForce(check_end(end, "der.end_force: end"), tuple(validate.vector3(force, "der.end_force: force")))
 
 
 def distributed_force(density):
-    return DistributedForce(tuple(float(f) for f in density))
+    """A uniform dead force per unit REST length along the whole rod (e.g. gravity: rho g per length).
+
+    Parameters
+    ----------
+    density : 3-vector
+        Force per unit rest length (force / length), the same vector everywhere, global frame, fixed in
+        direction. The rod of rest length L carries the total force ``density * L``, lumped onto the nodes by
+        the length each stands for (``Rod.node_weights``: an open rod's two outer nodes carry none). A
+        non-uniform load: use one ``der.point_force`` per node.
+
+    Returns
+    -------
+    DistributedForce, to pass in ``der.Scene(rod, loads=[...])``.
+
+    Example
+    -------
+    A cantilever sagging under its weight (weight per length 1e-3, along -z):
+
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 20, axis=[1, 0, 0], director=[0, 0, 1]), 1.0, 1.0)
+    >>> scene = der.Scene(rod, loads=[der.distributed_force([0, 0, -1e-3])], constraints=[der.clamp("start")])
+    """
+    return DistributedForce(tuple(validate.finite_array(
+        density, "der.distributed_force: density", (3,),
+        "a single finite 3-vector (force per unit rest length, uniform along the rod; for a non-uniform "
+        "load use one der.point_force per node)")))
 
 
 def end_torque(torque, end="end", follower=False):
+    """A torque on an end cross-section of an open rod: dead (a fixed vector) or follower (about the tangent).
+
+    Parameters
+    ----------
+    torque : 3-vector (dead) or float (follower)
+        ``follower=False`` (default): a dead torque, a 3-vector in the global frame (force * length) that keeps
+        its direction as the end turns; its component along the end tangent twists, the rest bends.
+        ``follower=True``: a scalar T (force * length), the moment T t about the CURRENT end tangent t (the
+        direction of increasing arc length at that end). Positive T is right-handed about t: at the "end" it
+        over-twists a rod whose other end is held (turns the end cross-section by +T L / A2 on a straight rod).
+    end : "start" or "end"
+        Which end (xi = 0 or xi = L); it acts on the material frame of the end edge.
+    follower : bool
+        Dead (False) or follower (True).
+
+    Returns
+    -------
+    EndTorque, to pass in ``der.Scene(rod, loads=[...])``.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 20), A1=1.0, A2=1.5)   # along +z
+    >>> dead = der.end_torque([0, 0, 1e-3])                  # a fixed vector: about z, twists this rod
+    >>> follower = der.end_torque(1e-3, follower=True)       # about the current end tangent
+    >>> scene = der.Scene(rod, loads=[follower], constraints=[der.clamp("start")])
+    """
+    if not isinstance(follower, (bool, np.bool_)):
+        raise TypeError(f"der.end_torque: follower must be True or False; got {follower!r}")
+    end = check_end(end, "der.end_torque: end")
     if follower:
-        return EndTorque(end, float(torque), True)
-    return EndTorque(end, tuple(float(f) for f in torque), False)
+        if np.ndim(torque) != 0 and not isinstance(torque, str):
+            raise ValueError(f"der.end_torque: a follower torque (follower=True) is a scalar T, the moment about the "
+                             f"current end tangent; got torque={torque!r} (for a fixed torque vector pass "
+                             "follower=False)")
+        return EndTorque(end, validate.finite_number(torque, "der.end_torque: torque (follower=True: the moment "
+                                                             "about the current end tangent)"), True)
+    if np.ndim(torque) == 0 and not isinstance(torque, (str, type(None))):
+        raise ValueError(f"der.end_torque: a dead torque (follower=False) is a 3-vector [Tx, Ty, Tz] in the global "
+                         f"frame; got the scalar torque={torque!r} (for a moment T about the current end tangent "
+                         "pass follower=True)")
+    return EndTorque(end, tuple(validate.vector3(torque, "der.end_torque: torque: dead end torque")),
+                     False)
 
 
 def twisting_moment(density):
-    return TwistingMoment(float(density))
+    """A uniform distributed twisting moment m_t per unit rest length about the current tangent (follower).
+
+    Parameters
+    ----------
+    density : float
+        Moment per unit rest length (force * length / length), a scalar, about the local tangent t as it
+        moves (positive over-twists: right-handed about the direction of increasing arc length). This is the
+        paper's m_t (Section 6.1, the loop under a twisting moment).
+
+    Returns
+    -------
+    TwistingMoment, to pass in ``der.Scene(rod, loads=[...])``.
+
+    Example
+    -------
+    >>> import der
+    >>> ring = der.rod_from_shape(der.shapes.ring(1.0, 50), A1=1.0, A2=1.5)
+    >>> scene = der.Scene(ring, loads=[der.twisting_moment(0.5)])
+    """
+    if np.ndim(density) != 0 and not isinstance(density, str):
+        raise ValueError(f"der.twisting_moment: density must be a single number (the moment per unit rest length "
+                         f"about the tangent, uniform along the rod); got {density!r}")
+    return TwistingMoment(validate.finite_number(density, "der.twisting_moment: density"))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from . import validate
 from .energies.bend import material_curvatures
 from .geometry import (
     curvature_binormals, edge_frames, frenet_directors, parallel_transport, reference_twist_angle, tangents,
@@ -51,6 +52,21 @@ class Rod:
         Ring only: the rotation (radians, right-handed about the tangent) with which its ends were welded
         (``with_imposed_twist``): at the wrap vertex 0 the first edge's material frame, continued from the
         last edge, is turned by it (``weld``), in the twisting and the bending energy alike.
+
+    Where the nodes lie: an open rod of rest length L with n edges has n + 1 nodes; its end cross-sections
+    (where clamps, end forces and end torques act) are the midpoints of the end edges, at xi = 0 and xi = L,
+    so the first and last nodes lie half an edge outside [0, L] (``xi_nodes``). A ring has n nodes.
+
+    Build one with ``der.rod_from_shape``; the copies ``with_natural``, ``with_stiffness`` and
+    ``with_imposed_twist`` change one property. A rod is immutable; its configuration is a ``RodState``.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, 1, 100), A1=1.0, A2=1.5)
+    >>> rod
+    Rod(open, n_edges=100, L=5.387, A1=1, A2=1.5, EA=None (inextensible), kappa0 ~ 1, omega0 ~ 0.6)
+    >>> state = rod.rest_state()
     """
 
     closed: bool
@@ -87,6 +103,18 @@ class Rod:
                              "alone?); set natural curvatures with Rod.with_natural(kappa_bar=...)")
         return np.ascontiguousarray(ke)
 
+    def __repr__(self):
+        kind = "ring" if self.closed else "open"
+        ea = "None (inextensible)" if self.EA is None else f"{self.EA:.4g}"
+        text = f"Rod({kind}, n_edges={self.n_edges}, L={self.length:.4g}, A1={self.A1:.4g}, A2={self.A2:.4g}, EA={ea}"
+        if self.voronoi.size:
+            k0 = np.linalg.norm(self.kappa_bar, axis=1) / self.voronoi
+            w0 = self.twist_bar / self.voronoi
+            text += f", kappa0 ~ {np.median(k0):.3g}, omega0 ~ {np.median(w0):.3g}"
+        if self.closed and self.imposed_twist:
+            text += f", imposed_twist={self.imposed_twist:.6g}"
+        return text + ")"
+
     @property
     def weld(self):
         """Per vertex: the turn of edge f's material frame as seen from edge e (radians); nonzero only at
@@ -98,14 +126,17 @@ class Rod:
 
     @property
     def n_edges(self):
+        """Number of edges n."""
         return self.edge_nodes.shape[0]
 
     @property
     def n_nodes(self):
+        """Number of nodes: n + 1 for an open rod, n for a ring."""
         return self.n_edges if self.closed else self.n_edges + 1
 
     @property
     def n_vertices(self):
+        """Number of interior vertices (bending/twisting stencils): n - 1 for an open rod, n for a ring."""
         return self.vertex_nodes.shape[0]
 
     @property
@@ -160,45 +191,67 @@ class Rod:
 
     @property
     def inextensible(self):
+        """True when ``EA`` is None (the tension is a Lagrange multiplier)."""
         return self.EA is None
 
     def rest_state(self):
-        """A fresh state equal to the rest shape."""
+        """A fresh ``RodState`` equal to the rest shape (theta = 0, frames on the rest directors).
+
+        Example
+        -------
+        >>> import der
+        >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 10), 1.0, 1.0)
+        >>> rod.rest_state().positions.shape
+        (11, 3)
+        """
         t = tangents(self.rest_q, self.edge_nodes)
         return RodState(self.rest_q.copy(), self.rest_d1.copy(), t, self.rest_twist.copy(),
                         np.zeros(self.n_edges))
 
     def with_natural(self, kappa_bar=None, twist_bar=None):
-        """A copy with other natural integrated curvatures and/or twists (n_vertices,), same shape: e.g.
-        ``kappa_bar=0`` for a naturally straight rod bent into the shape.
+        """A copy with other natural curvatures and/or twists, same rest shape.
 
-        ``kappa_bar`` broadcastable to (n_vertices, 2) sets both edge sides of each vertex to it; an array of
-        shape (n_vertices, 2, 2) sets the two sides apart (see ``kappa_bar_edges``). To rescale the natural
-        curvature of a rest shape that twists between its edges, scale ``kappa_bar_edges`` (``kappa_bar`` holds
-        only the mean of the two sides)."""
+        Parameters
+        ----------
+        kappa_bar : float, (n_vertices, 2) or (n_vertices, 2, 2) array, optional
+            Natural INTEGRATED material curvatures (kappa1, kappa2) per vertex (dimensionless: curvature times
+            the Voronoi length ``voronoi``); a scalar is used for every entry, e.g. 0 for a naturally straight
+            rod bent into this shape. A (n_vertices, 2) array sets both edge sides of each vertex to it; an
+            array of shape (n_vertices, 2, 2) sets the two sides apart (see ``kappa_bar_edges``). To rescale
+            the natural curvature of a rest shape that twists between its edges, scale ``kappa_bar_edges``
+            (``kappa_bar`` holds only the mean of the two sides). None keeps the rod's.
+        twist_bar : float or (n_vertices,) array, optional
+            Natural integrated twist per vertex (radians: omega0 times the Voronoi length). None keeps it.
+
+        Example
+        -------
+        >>> import der
+        >>> ring = der.rod_from_shape(der.shapes.ring(1.0, 50), 1.0, 1.5)
+        >>> straight_ring = ring.with_natural(kappa_bar=0.0)          # Michell's naturally straight ring
+        """
         nv = self.kappa_bar.shape[0]
         if kappa_bar is None:
             kb, ke = self.kappa_bar, self.kappa_bar_edges
         else:
-            arr = np.asarray(kappa_bar, float)
-            if arr.ndim == 3:
-                if arr.shape != (nv, 2, 2):
-                    raise ValueError(f"with_natural: a per-edge-side kappa_bar must have shape ({nv}, 2, 2); "
-                                     f"got {arr.shape}")
-                ke = arr.copy()
+            try:
+                ndim = np.ndim(kappa_bar)
+            except Exception:          # ragged input: finite_array below says what is wrong
+                ndim = 0
+            if ndim == 3:
+                ke = self._natural(kappa_bar, "kappa_bar", (nv, 2, 2))
             else:
-                try:
-                    arr = np.broadcast_to(arr, (nv, 2))
-                except ValueError:
-                    raise ValueError(f"with_natural: kappa_bar must broadcast to ({nv}, 2) or have shape ({nv}, 2, 2); "
-                                     f"got {arr.shape}") from None
-                ke = np.repeat(arr[:, None, :], 2, axis=1)
+                ke = np.repeat(self._natural(kappa_bar, "kappa_bar", (nv, 2))[:, None, :], 2, axis=1)
             kb = ke.mean(axis=1)
-        tb = self.twist_bar if twist_bar is None else np.broadcast_to(np.asarray(twist_bar, float),
-                                                                     self.twist_bar.shape).copy()
-        if not (np.all(np.isfinite(kb)) and np.all(np.isfinite(tb))):
-            raise ValueError("natural curvatures and twists must be finite")
+        tb = self.twist_bar if twist_bar is None else self._natural(twist_bar, "twist_bar", self.twist_bar.shape)
         return replace(self, kappa_bar=kb, kappa_bar_edges=ke, twist_bar=tb)
+
+    def _natural(self, value, name, shape):
+        dims = ", ".join(str(d) for d in shape) + ("," if len(shape) == 1 else "")
+        allowed = f"a finite number or an array of shape ({dims}) (one per vertex: this rod has {self.n_vertices})"
+        arr = validate.finite_array(value, f"Rod.with_natural: {name}", None, allowed)
+        if arr.ndim != 0 and arr.shape != shape:
+            raise ValueError(f"Rod.with_natural: {name} must be {allowed}; got shape {arr.shape}")
+        return np.broadcast_to(arr, shape).copy()
 
     def with_imposed_twist(self, twist):
         """A ring whose ends were welded after a rotation by ``twist`` radians about the tangent (extra
@@ -207,19 +260,59 @@ class Rod:
         The weld sits at vertex 0 (between the last edge and the first): there the first edge's material
         frame, continued from the last edge, is turned by ``twist`` (``weld``). Once the edge angles relax, a
         naturally straight ring carries the uniform twist ``twist / L``. Calling it again replaces the weld.
+
+        Example
+        -------
+        >>> import numpy as np, der
+        >>> ring = der.rod_from_shape(der.shapes.ring(1.0, 50), 1.0, 1.5).with_imposed_twist(2 * np.pi)  # Lk = 1
         """
         if not self.closed:
             raise ValueError("with_imposed_twist: an imposed twist needs a closed ring (the rod is open); "
                              "twist an open rod with an end torque or a clamp rotation instead")
-        twist = float(twist)
-        if not np.isfinite(twist):
-            raise ValueError(f"with_imposed_twist: twist must be finite; got {twist}")
+        twist = validate.finite_number(twist, "Rod.with_imposed_twist: twist (radians)")
         return replace(self, imposed_twist=twist)
 
     def displaced(self, state, dx=None, dtheta=None):
-        """A copy of ``state`` with its nodes moved by ``dx`` (n_nodes, 3) and its edge angles turned by
-        ``dtheta`` (n_edges,) [radians], reference frames parallel-transported along the straight path (so
-        the reference twist stays continuous: windings and a ring's linking number are kept)."""
+        """A copy of ``state`` with its nodes moved by ``dx`` and its edge angles turned by ``dtheta``.
+
+        The reference frames are parallel-transported along the straight path, so the reference twist stays
+        continuous (windings and a ring's linking number are kept). ``state`` is not modified.
+
+        Parameters
+        ----------
+        state : RodState
+            A state of this rod.
+        dx : (n_nodes, 3) array, optional
+            Node displacements (length units); a flat array of 3 n_nodes entries is accepted too.
+        dtheta : float or (n_edges,) array, optional
+            Turn of each edge's material frame about its tangent (radians, right-handed).
+
+        Example
+        -------
+        A small out-of-plane kick of a ring, e.g. to start a buckling solve off the symmetric state:
+
+        >>> import numpy as np, der
+        >>> ring = der.rod_from_shape(der.shapes.ring(1.0, 40), 1.0, 1.5)
+        >>> state = ring.rest_state()
+        >>> dx = np.zeros((ring.n_nodes, 3))
+        >>> dx[:, 2] = 1e-3 * np.sin(2 * np.linspace(0, 2 * np.pi, ring.n_nodes, endpoint=False))
+        >>> kicked = ring.displaced(state, dx)
+        """
+        check_state(self, state, "Rod.displaced")
+        if dx is not None:
+            arr = validate.finite_array(dx, "Rod.displaced: dx", None,
+                                        f"an array of shape ({self.n_nodes}, 3) (one displacement per node)")
+            if arr.shape not in ((self.n_nodes, 3), (3 * self.n_nodes,)):
+                raise ValueError(f"Rod.displaced: dx must be an array of shape ({self.n_nodes}, 3) (one displacement "
+                                 f"per node); got shape {arr.shape}")
+            dx = arr
+        if dtheta is not None:
+            arr = validate.finite_array(dtheta, "Rod.displaced: dtheta", None,
+                                        f"a number or an array of shape ({self.n_edges},) (one angle per edge)")
+            if arr.ndim != 0 and arr.shape != (self.n_edges,):
+                raise ValueError(f"Rod.displaced: dtheta must be a number or an array of shape ({self.n_edges},) "
+                                 f"(one angle per edge); got shape {arr.shape}")
+            dtheta = arr
         from .geometry import transport_frames
 
         out = state.copy()
@@ -233,11 +326,23 @@ class Rod:
         return out
 
     def with_stiffness(self, A1=None, A2=None, EA=...):
-        """A copy with other stiffnesses (same shape and rest state)."""
-        new = replace(self, A1=self.A1 if A1 is None else float(A1), A2=self.A2 if A2 is None else float(A2),
-                      EA=self.EA if EA is ... else EA)
-        _check_stiffness(new.A1, new.A2, new.EA)
-        return new
+        """A copy with other stiffnesses (same shape and rest state).
+
+        Parameters
+        ----------
+        A1, A2 : float, optional
+            Bending and twisting stiffness (force * length^2), > 0; None keeps the rod's.
+        EA : float or None, optional
+            Axial stiffness (force), or None for inextensible; omitted keeps the rod's.
+
+        Example
+        -------
+        >>> import der
+        >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 10), 1.0, 1.0).with_stiffness(A2=2.0, EA=1e6)
+        """
+        A1, A2, EA = _check_stiffness(self.A1 if A1 is None else A1, self.A2 if A2 is None else A2,
+                                      self.EA if EA is ... else EA, "Rod.with_stiffness")
+        return replace(self, A1=A1, A2=A2, EA=EA)
 
 
 @dataclass(eq=False)
@@ -251,6 +356,19 @@ class RodState:
     lam : (n_edges,) tension multipliers of an inextensible rod (force); zeros otherwise.
     penalty : (n_edges,) the axial penalty the solver used with ``lam`` (force/length), or None. The tension of
         edge j is ``lam_j + penalty_j g_j`` (g the elongation); ``der.diagnostics`` uses it.
+
+    Node positions and angles are views (``positions``, ``theta``); a state belongs to one rod (same sizes).
+    Get one from ``Rod.rest_state()`` or ``der.solve(...).state``.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 10), 1.0, 1.0)
+    >>> state = rod.rest_state()
+    >>> state
+    RodState(n_edges=10, n_nodes=11, |theta| <= 0, bounding box 0 x 0 x 1.111)
+    >>> state.positions[-1]        # the outer node, half an edge beyond the end xi = L = 1
+    array([0.        , 0.        , 1.05555556])
     """
 
     q: np.ndarray
@@ -260,7 +378,15 @@ class RodState:
     lam: np.ndarray = field(default_factory=lambda: np.zeros(0))
     penalty: np.ndarray | None = None
 
+    def __repr__(self):
+        n_edges = self.d1.shape[0]
+        x = self.positions
+        box = " x ".join(f"{v:.4g}" for v in (x.max(axis=0) - x.min(axis=0))) if x.size else "empty"
+        th = float(np.abs(self.theta).max()) if n_edges else 0.0
+        return (f"RodState(n_edges={n_edges}, n_nodes={x.shape[0]}, |theta| <= {th:.4g}, bounding box {box})")
+
     def copy(self):
+        """An independent copy (all arrays copied)."""
         return RodState(self.q.copy(), self.d1.copy(), self.tangents.copy(), self.reference_twist.copy(),
                         self.lam.copy(), None if self.penalty is None else self.penalty.copy())
 
@@ -275,6 +401,7 @@ class RodState:
         return self.q.reshape(-1, 4)[: self.d1.shape[0], 3]
 
     def copy_from(self, other):
+        """Overwrite this state's arrays in place with ``other``'s (same rod)."""
         self.q[:] = other.q
         self.d1[:] = other.d1
         self.tangents[:] = other.tangents
@@ -287,12 +414,24 @@ class RodState:
 # ---------------------------------------------------------------------------------------------
 
 
-def _check_stiffness(A1, A2, EA):
-    for name, val in (("A1", A1), ("A2", A2)):
-        if not (isinstance(val, (int, float, np.floating, np.integer)) and np.isfinite(val) and val > 0):
-            raise ValueError(f"{name} must be a finite number > 0 (bending/twisting stiffness); got {val!r}")
-    if EA is not None and not (np.isfinite(EA) and EA > 0):
-        raise ValueError(f"EA must be None (inextensible) or a finite number > 0; got {EA!r}")
+def _check_stiffness(A1, A2, EA, where="der.rod_from_shape"):
+    """(A1, A2, EA) as floats (EA None for inextensible), or a TypeError/ValueError naming the argument."""
+    A1 = validate.positive_number(A1, f"{where}: A1", "a finite number > 0 (bending stiffness, force * length^2)")
+    A2 = validate.positive_number(A2, f"{where}: A2", "a finite number > 0 (twisting stiffness, force * length^2)")
+    if EA is not None:
+        EA = validate.positive_number(EA, f"{where}: EA", "None (inextensible) or a finite number > 0")
+    return A1, A2, EA
+
+
+def check_state(rod, state, where):
+    """Refuse, before any work, a state that is not a ``RodState`` of this rod (its array sizes differ)."""
+    if not isinstance(state, RodState):
+        raise TypeError(f"{where}: state must be a der.RodState (rod.rest_state() or a solve's result.state); got "
+                        f"{type(state).__name__}")
+    if state.q.shape != (rod.n_dof,) or state.d1.shape != (rod.n_edges, 3) \
+            or state.reference_twist.shape != (rod.n_vertices,):
+        raise ValueError(f"{where}: state does not belong to this rod: it has {state.d1.shape[0]} edges and "
+                         f"{state.q.shape[0] // 4} nodes, the rod {rod.n_edges} edges and {rod.n_nodes} nodes")
 
 
 def topology(n_edges, closed):
@@ -380,13 +519,17 @@ def rod_from_shape(shape, A1, A2, EA=None, rho_A=1.0, rho_J=None):
     Raises ValueError, before any work, for too few edges, non-finite or coincident nodes, edges folding
     back onto each other, or non-positive stiffness.
     """
-    x = np.asarray(shape.positions, dtype=float)
+    if not hasattr(shape, "positions"):
+        raise TypeError(f"der.rod_from_shape: shape must be a der.shapes.Shape (e.g. der.shapes.helix(...)); got "
+                        f"{type(shape).__name__}")
+    x = validate.finite_array(shape.positions, "der.rod_from_shape: shape.positions", None,
+                              "an array of real numbers of shape (n_nodes, 3)", finite=False)
     closed = bool(shape.closed)
-    _check_stiffness(A1, A2, EA)
-    if not (np.isfinite(rho_A) and rho_A > 0):
-        raise ValueError(f"rho_A must be finite and > 0; got {rho_A!r}")
-    if rho_J is not None and not (np.isfinite(rho_J) and rho_J > 0):
-        raise ValueError(f"rho_J must be None or finite and > 0; got {rho_J!r}")
+    A1, A2, EA = _check_stiffness(A1, A2, EA)
+    rho_A = validate.positive_number(rho_A, "der.rod_from_shape: rho_A", "a finite number > 0 (mass per length)")
+    if rho_J is not None:
+        rho_J = validate.positive_number(rho_J, "der.rod_from_shape: rho_J",
+                                         "None or a finite number > 0 (rotational inertia per length)")
     if x.ndim != 2 or x.shape[1] != 3:
         raise ValueError(f"positions must have shape (n_nodes, 3); got {x.shape}")
     n_edges = x.shape[0] if closed else x.shape[0] - 1

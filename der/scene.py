@@ -11,6 +11,7 @@ import numpy as np
 from numba import njit
 
 from . import constraints as _constraints
+from . import validate
 from .energies.bend import bend_energy, bend_gradient, bend_hessian
 from .energies.stretch import stretch_energy, stretch_gradient, stretch_hessian
 from .energies.twist import twist_energy, twist_gradient, twist_hessian
@@ -40,6 +41,19 @@ class Scene:
         ``der.twisting_moment`` records.
     constraints : sequence
         ``der.clamp``, ``der.pin``, ``der.fix_theta`` records.
+
+    Everything is checked here, before any work: an unknown load or constraint, a node out of range, an end
+    load on a ring, conflicting pins raise a ValueError (or TypeError) naming the argument. Loads act in the
+    global frame unless they are follower loads (``end_torque(..., follower=True)``, ``twisting_moment``).
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.helix(kappa0=1.0, omega0=0.6, turns=1, n=50), A1=1.0, A2=1.5)
+    >>> scene = der.Scene(rod, loads=[der.end_force([0, 0, 1e-3])], constraints=[der.clamp("start")])
+    >>> result = der.solve(scene)
+    >>> result.converged
+    True
     """
 
     rod: Rod
@@ -68,36 +82,31 @@ class Scene:
         return _constraints.fixed_dofs(self.rod, self.constraints)
 
 
-def _vec3(value, what):
-    v = np.asarray(value, dtype=float)
-    if v.shape != (3,) or not np.isfinite(v).all():
-        raise ValueError(f"{what} must be a finite 3-vector; got {value!r}")
-    return v
-
-
 def _check_load(rod, load):
+    """Check a load record against the rod, before any work (the constructors check the values themselves;
+    this catches records built by hand and what needs the rod: node ranges, ends of a ring)."""
     if isinstance(load, PointForce):
-        if not -rod.n_nodes <= load.node < rod.n_nodes:
-            raise ValueError(f"point force on node {load.node}: out of range for {rod.n_nodes} nodes")
-        _vec3(load.force, "point force")
+        node = validate.integer(load.node, "der.point_force: node", "an integer node index")
+        if not -rod.n_nodes <= node < rod.n_nodes:
+            raise ValueError(f"point force on node {node}: out of range for {rod.n_nodes} nodes "
+                             f"(allowed: {-rod.n_nodes} ... {rod.n_nodes - 1})")
+        validate.vector3(load.force, "der.point_force: force")
     elif isinstance(load, EndForce):
         _constraints.end_index(rod, load.end)
-        _vec3(load.force, "end force")
+        validate.vector3(load.force, "der.end_force: force")
     elif isinstance(load, DistributedForce):
-        _vec3(load.density, "distributed force density")
+        validate.vector3(load.density, "der.distributed_force: density")
     elif isinstance(load, EndTorque):
         _constraints.end_index(rod, load.end)
         if load.follower:
-            if not np.isfinite(load.torque):
-                raise ValueError(f"follower end torque must be a finite number; got {load.torque!r}")
+            validate.finite_number(load.torque, "der.end_torque: torque (follower=True: a scalar)")
         else:
-            _vec3(load.torque, "dead end torque")
+            validate.vector3(load.torque, "der.end_torque: torque: dead end torque")
     elif isinstance(load, TwistingMoment):
-        if not np.isfinite(load.density):
-            raise ValueError(f"twisting moment density must be finite; got {load.density!r}")
+        validate.finite_number(load.density, "der.twisting_moment: density")
     else:
-        raise ValueError(f"unknown load {load!r}; use der.point_force, der.distributed_force, der.end_torque "
-                         "or der.twisting_moment")
+        raise ValueError(f"der.Scene: loads: unknown load {load!r}; use der.point_force, der.end_force, "
+                         "der.distributed_force, der.end_torque or der.twisting_moment")
 
 
 Plan = namedtuple("Plan", [

@@ -1,5 +1,6 @@
 """Solvers: damped dynamics to static equilibrium (implicit by default, explicit as the reference)."""
 import dataclasses
+import os
 import sys
 import time
 import warnings
@@ -48,14 +49,38 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
 
     Returns
     -------
-    SolveResult, with the stability of the equilibrium (``min_eigenvalue``, ``stable``) when converged.
+    SolveResult, with the stability of the equilibrium (``min_eigenvalue``, ``stable``) when converged;
+    ``print(result)`` shows a short summary. ``wall_time`` is the solve alone: the first solve of a process
+    first compiles der's kernels (or loads them from numba's cache), reported apart as ``compile_time``; on a
+    cold cache it prints "compiling der's kernels (first run only, about a minute)" to stderr before it does.
 
-    Raises ValueError before any work for a load whose scale is not a finite double, and for a scene with no
-    static equilibrium (a net dead force along a translation, or a net dead torque about a rotation, that its
-    constraints leave free). Warns ``RoundoffFloorWarning`` for status "converged_at_floor" (converged, but at
-    the round-off floor above ``tol``) and ``LockedRodWarning`` for an inextensible rod locked between fixed
-    ends (constraint tension far above A1/L^2 that its loads do not explain).
+    Raises
+    ------
+    ValueError / TypeError before any work for bad arguments (a state of another rod, an unwritable
+    ``record`` path, ...), for a load whose scale is not a finite double, and for a scene with no static
+    equilibrium (a net dead force along a translation, or a net dead torque about a rotation, that its
+    constraints leave free); ConvergenceError (with ``.result``) when not converged and ``raise_on_failure``.
+
+    Warns
+    -----
+    ``RoundoffFloorWarning`` for status "converged_at_floor" (converged, but at the round-off floor above
+    ``tol``) and ``LockedRodWarning`` for an inextensible rod locked between fixed ends (constraint tension far
+    above A1/L^2 that its loads do not explain).
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 20), A1=1.0, A2=1.5)
+    >>> scene = der.Scene(rod, loads=[der.end_torque(1.5e-3, follower=True)], constraints=[der.clamp("start")])
+    >>> result = der.solve(scene, tol=1e-10)
+    >>> result.converged, round(float(der.diagnostics.end_motion(rod, result.state)[1][0]), 9)   # T L / A2
+    (True, 0.001)
     """
+    from ..scene import Scene
+
+    if not isinstance(scene, Scene):
+        raise TypeError(f"der.solve: scene must be a der.Scene (der.Scene(rod, loads=[...], constraints=[...])); "
+                        f"got {type(scene).__name__}")
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}; got {solver!r}")
     if options is None:
@@ -70,6 +95,9 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
     elif not (np.isfinite(state.q).all() and np.isfinite(state.d1).all() and np.isfinite(state.reference_twist).all()):
         bad = int(np.flatnonzero(~np.isfinite(state.q))[0]) if not np.isfinite(state.q).all() else -1
         raise ValueError(f"the starting state must be finite (entry {bad} of q is {state.q[bad] if bad >= 0 else '?'})")
+    if record is not None and isinstance(record, (str, os.PathLike)):
+        check_record_path(record, "der.solve: record")
+    compile_time = _compile_first()
     system = build_system(scene, options)     # refuses loads whose scale is not a finite double
     work = prepare_state(system, state)
     check_equilibrium_exists(system, work)    # refuses a net load on a rigid motion nothing can react to
@@ -100,6 +128,8 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
             from .stability import stability
 
             stability(system, result, options.n_eigenvalues)
+        result.compile_time = compile_time
+        result.tol = options.tol
         if recorder is not None:
             recorder.log_final(result)
     finally:
@@ -110,11 +140,59 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
     return result
 
 
+def _compile_first():
+    """On the first solve of a process, compile (or load from numba's cache) every kernel before any clock
+    starts, announcing a compilation on stderr; returns the seconds it took (0 afterwards)."""
+    from ..warmup import is_done, warmup
+
+    return 0.0 if is_done() else warmup()
+
+
+def check_record_path(path, name):
+    """Refuse, before any work, a recording path that cannot be written (ValueError naming ``name``)."""
+    path = os.fspath(path)
+    if not path:
+        raise ValueError(f"{name} must be the path of a .rrd file to write; got an empty string")
+    if os.path.isdir(path):
+        raise ValueError(f"{name}: {path!r} is a directory; give the path of a .rrd file to write")
+    parent = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(parent):
+        raise ValueError(f"{name}: cannot write {path!r}: the folder {parent} does not exist (create it first)")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"{name}: cannot write {path!r}: the folder {parent} is not writable")
+    if os.path.exists(path) and not os.access(path, os.W_OK):
+        raise ValueError(f"{name}: cannot write {path!r}: the file exists and is not writable")
+
+
 def check_stability(scene, state, n_eigenvalues=6):
-    """Stability of ``state`` as an equilibrium of ``scene`` (it need not be one exactly): a SolveResult-like
-    record with ``min_eigenvalue``, ``eigenvalues``, ``stable``, ``flutter`` and ``stability_note``."""
+    """Stability of ``state`` as an equilibrium of ``scene`` (it need not be one exactly).
+
+    Parameters
+    ----------
+    scene : der.Scene
+    state : der.RodState
+        A state of the scene's rod, e.g. a solve's ``result.state``.
+    n_eigenvalues : int
+        How many of the lowest eigenvalues of the constrained stiffness to compute.
+
+    Returns
+    -------
+    A SolveResult-like record with ``min_eigenvalue``, ``eigenvalues`` (squared natural frequencies, rigid-body
+    and symmetry modes removed), ``stable`` (no eigenvalue with a negative real part), ``flutter`` and
+    ``stability_note``.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 20), A1=1.0, A2=1.5)
+    >>> scene = der.Scene(rod, constraints=[der.clamp("start")])
+    >>> der.check_stability(scene, rod.rest_state()).stable
+    True
+    """
+    from ..rod import check_state
     from .stability import stability
 
+    check_state(scene.rod, state, "der.check_stability")
     system = build_system(scene, SolverOptions())
     work = prepare_state(system, state)
     result = SolveResult(state=work, converged=True, status="", residual=float("nan"), iterations=0,

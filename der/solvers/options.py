@@ -42,6 +42,14 @@ class SolverOptions:
     n_eigenvalues : how many of the lowest eigenvalues to report.
     progress : print progress to stderr (None: only for solves longer than 2 s).
     record_every : log every k-th iteration (implicit) or check (explicit) to a recording.
+
+    Example
+    -------
+    >>> import der
+    >>> options = der.SolverOptions(tol=1e-10, max_iterations=100)
+    >>> options
+    SolverOptions(tol=1e-10, max_iterations=100)
+    >>> # result = der.solve(scene, options=options)   # or der.solve(scene, tol=1e-10, max_iterations=100)
     """
 
     tol: float = 1e-8
@@ -88,6 +96,11 @@ class SolverOptions:
         if not 0 < self.armijo < 0.5:
             raise ValueError(f"SolverOptions.armijo must be in (0, 0.5); got {self.armijo!r}")
 
+    def __repr__(self):
+        """Only the fields that differ from the defaults (a valid constructor call)."""
+        changed = [f"{f.name}={getattr(self, f.name)!r}" for f in fields(self) if getattr(self, f.name) != f.default]
+        return f"SolverOptions({', '.join(changed)})"
+
     @property
     def effective_strain_tol(self):
         return self.tol if self.strain_tol is None else self.strain_tol
@@ -111,13 +124,34 @@ CONVERGED_STATUSES = ("converged", "converged_at_floor")
 class RoundoffFloorWarning(UserWarning):
     """A solve stopped at the round-off floor of its residual, above the requested ``tol`` (status
     "converged_at_floor"): the arithmetic cannot certify the equilibrium more closely. The message gives the
-    ratio residual / tol."""
+    ratio residual / tol.
+
+    Example
+    -------
+    Turn it into an error, or silence it, with the standard ``warnings`` filters:
+
+    >>> import warnings, der
+    >>> warnings.simplefilter("error", der.RoundoffFloorWarning)     # a floor verdict now raises
+    >>> warnings.resetwarnings()
+    """
 
 
 class LockedRodWarning(UserWarning):
     """An inextensible rod held at both ends carries a constraint tension far above its bending scale A1/L^2
     that its loads do not explain: it is locked between its fixed ends (it cannot bend without changing its
-    chord), so its answer is the inextensible limit, not beam theory."""
+    chord), so its answer is the inextensible limit, not beam theory. Give the rod a finite ``EA``
+    (``der.rod_from_shape(..., EA=...)``) or let one end slide (``der.clamp("end", slide=axis)``).
+
+    Example
+    -------
+    >>> import warnings, der
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always", der.LockedRodWarning)
+    ...     # a solve of a rod clamped at both ends and turned at one of them would record it here
+    ...     pass
+    >>> caught
+    []
+    """
 
 
 @dataclass
@@ -139,6 +173,26 @@ class SolveResult:
         complex eigenvalues appear among the lowest (circulatory loads: the undamped rod would flutter).
     energy : energy by term at the final state.
     history : residual after each iteration/check.
+    compile_time : seconds spent compiling (or loading from numba's cache) der's kernels before this solve,
+        on the first solve of a process; never part of ``wall_time``. 0 afterwards.
+    tol : the residual tolerance the solve was asked for.
+
+    ``print(result)`` shows a short summary (``repr``); the arrays are attributes (``result.state``,
+    ``result.eigenvalues``, ``result.history``).
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 20), A1=1.0, A2=1.5)
+    >>> scene = der.Scene(rod, loads=[der.end_torque(1e-3, follower=True)], constraints=[der.clamp("start")])
+    >>> result = der.solve(scene)
+    >>> result.converged, result.status
+    (True, 'converged')
+    >>> print(result)                                         # doctest: +SKIP
+    SolveResult(converged, implicit solver)
+      residual 3.25e-15 <= tol 1e-08 after 1 iteration; wall time 0.000333 s
+      stable: True (min eigenvalue 11.13, flutter)
+      message: residual 3.25e-15 <= tol 1.0e-08
     """
 
     state: object
@@ -161,10 +215,54 @@ class SolveResult:
     dt: float | None = None
     residual_floor: float = float("nan")
     residual_per_length: float = float("nan")
+    compile_time: float = 0.0
+    tol: float = float("nan")
+
+    def __repr__(self):
+        """One short paragraph: status, residual against tol, iterations, times, stability, message."""
+        def num(v, fmt=".3g"):
+            return "nan" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, fmt)
+
+        head = self.status or ("converged" if self.converged else "not converged")
+        if self.converged and head != "converged":
+            head += ", converged"
+        elif not self.converged:
+            head += ", NOT converged"
+        rel = "<=" if self.residual <= self.tol else ">" if self.tol == self.tol else "vs"
+        lines = [f"SolveResult({head}" + (f", {self.solver} solver)" if self.solver else ")"),
+                 f"  residual {num(self.residual, '.2e')} {rel} tol {num(self.tol, '.0e')} after {self.iterations} "
+                 f"iteration{'' if self.iterations == 1 else 's'}; wall time {num(self.wall_time)} s"]
+        stability_time = getattr(self, "stability_time", None)
+        if stability_time:
+            lines[-1] += f", stability {num(stability_time)} s"
+        if self.compile_time:
+            lines[-1] += f" (+{num(self.compile_time)} s compiling or loading the kernels, not in wall time)"
+        if self.stable is not None:
+            lines.append(f"  stable: {self.stable} (min eigenvalue {num(self.min_eigenvalue, '.4g')}"
+                         + (", flutter)" if self.flutter else ")"))
+        message = self.message if len(self.message) <= 200 else self.message[:197] + "..."
+        lines.append(f"  message: {message}")
+        return "\n".join(lines)
 
 
 class ConvergenceError(RuntimeError):
-    """Raised when a solve does not converge; ``.result`` holds the SolveResult with the last state."""
+    """Raised by ``der.solve`` when a solve does not converge; ``.result`` holds the SolveResult with the last state.
+
+    Parameters
+    ----------
+    result : SolveResult
+        The unconverged result (``status``, ``residual``, ``message``, and the last finite ``state``).
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 20), A1=1.0, A2=1.5)
+    >>> scene = der.Scene(rod, loads=[der.end_force([1e-3, 0, 0])], constraints=[der.clamp("start")])
+    >>> try:
+    ...     der.solve(scene, max_iterations=1, newton_first=False)
+    ... except der.ConvergenceError as exc:
+    ...     last_state = exc.result.state                    # continue from here, or inspect exc.result
+    """
 
     def __init__(self, result):
         self.result = result

@@ -1,0 +1,106 @@
+"""Contact groundwork (issue 14): segment distances, the IPC barrier, CCD, a broad phase and obstacles.
+
+Numba kernels on flat arrays (``distance``, ``barrier``, ``ccd``, ``broadphase``, ``obstacles``) and a thin
+Python layer (this module) that a contact term of the Scene can call. Nothing here is imported by
+``import der``: a scene without contact loads none of it. Design and integration: docs/contact.md.
+
+Conventions: positions (n_nodes, 3) float64; edges (n_edges, 2) int64 node indices over all rods;
+edge_radius (n_edges,) the rod radius r of each edge (two edges touch at centreline distance r_a + r_b);
+dhat the barrier's activation gap (length); kappa the barrier stiffness (energy / length^2 in GAP mode).
+"""
+from typing import NamedTuple
+
+import numpy as np
+
+from .barrier import GAP, SQUARED, assemble_pairs, pair_barrier  # noqa: F401
+from .broadphase import edge_boxes, exclusion_k, hash_grid_pairs, swept_edge_boxes  # noqa: F401
+from .ccd import pairs_ccd, segment_ccd  # noqa: F401
+from .distance import segment_distance2, segment_distance2_derivatives  # noqa: F401
+
+__all__ = ["ContactTopology", "topology", "candidate_pairs", "barrier_system", "safe_step", "exclusion_k",
+           "GAP", "SQUARED"]
+
+
+class ContactTopology(NamedTuple):
+    """Flat description of the rods' edges for the broad phase's neighbour exclusion."""
+    edges: np.ndarray          # (n_edges, 2) int64 global node indices
+    rod_of_edge: np.ndarray    # (n_edges,) int64
+    local_edge: np.ndarray     # (n_edges,) int64 index of the edge along its rod
+    rod_n_edges: np.ndarray    # (n_rods,) int64
+    rod_closed: np.ndarray     # (n_rods,) int64 (0/1)
+    rod_k: np.ndarray          # (n_rods,) int64 excluded index distance (broadphase.exclusion_k)
+    edge_radius: np.ndarray    # (n_edges,) float64
+
+
+def topology(rods, dhat):
+    """ContactTopology of several rods given as (n_edges, closed, radius, h_min) tuples, nodes numbered rod
+    after rod (an open rod of n edges has n + 1 nodes, a ring n); k from exclusion_k(h_min, radius, dhat)."""
+    edges, rod_of, local, radius = [], [], [], []
+    n_e, closed, ks = [], [], []
+    node0 = 0
+    for r, (n, is_closed, rad, h_min) in enumerate(rods):
+        if int(n) != n or n < 1:
+            raise ValueError(f"topology: rod {r} needs a positive integer number of edges, got {n!r}")
+        k = exclusion_k(h_min, rad, dhat)
+        n_nodes = n if is_closed else n + 1
+        i = np.arange(n)
+        edges.append(np.stack([node0 + i, node0 + (i + 1) % n_nodes], axis=1))
+        rod_of.append(np.full(n, r))
+        local.append(i)
+        radius.append(np.full(n, float(rad)))
+        n_e.append(n)
+        closed.append(int(bool(is_closed)))
+        ks.append(k)
+        node0 += n_nodes
+    as_i = lambda a: np.ascontiguousarray(np.concatenate(a), dtype=np.int64)  # noqa: E731
+    return ContactTopology(as_i(edges).reshape(-1, 2), as_i(rod_of), as_i(local),
+                           np.array(n_e, dtype=np.int64), np.array(closed, dtype=np.int64),
+                           np.array(ks, dtype=np.int64), np.concatenate(radius))
+
+
+def candidate_pairs(pos, topo, dhat, pos1=None):
+    """Edge pairs that may be within the barrier range (gap < dhat) at pos, or, with pos1, at any time of the
+    linear step pos -> pos1 (boxes swept over the step). Neighbours along a rod are excluded."""
+    inflate = topo.edge_radius + 0.5 * dhat
+    m = topo.edges.shape[0]
+    lo, hi = np.empty((m, 3)), np.empty((m, 3))
+    if pos1 is None:
+        edge_boxes(pos, topo.edges, inflate, lo, hi)
+    else:
+        swept_edge_boxes(pos, pos1, topo.edges, inflate, lo, hi)
+    return hash_grid_pairs(lo, hi, topo.rod_of_edge, topo.local_edge, topo.rod_n_edges, topo.rod_closed,
+                           topo.rod_k)
+
+
+def barrier_system(pos, topo, pairs, dhat, kappa, node_dof, n_dof, mode=GAP, project=True):
+    """Barrier energy, gradient (n_dof,) and Hessian COO triplets (rows, cols, vals) of the pairs.
+
+    Returns (energy, grad, (rows, cols, vals), n_active, min_gap). Raises ValueError if a pair's gap is <= 0
+    (an inadmissible state, naming the two edges)."""
+    n_p = pairs.shape[0]
+    grad = np.zeros(n_dof)
+    rows = np.empty(144 * n_p, dtype=np.int64)
+    cols = np.empty(144 * n_p, dtype=np.int64)
+    vals = np.empty(144 * n_p)
+    energy, n_active, nt, min_gap = assemble_pairs(pos, topo.edges, pairs, topo.edge_radius, dhat, kappa,
+                                                   mode, project, node_dof, grad, rows, cols, vals)
+    if not np.isfinite(energy):
+        gaps = [np.sqrt(segment_distance2(np.concatenate([pos[topo.edges[a]].ravel(), pos[topo.edges[b]].ravel()])))
+                - topo.edge_radius[a] - topo.edge_radius[b] for a, b in pairs]
+        p = int(np.argmin(gaps))
+        raise ValueError(f"barrier_system: edges {pairs[p, 0]} and {pairs[p, 1]} overlap: centreline gap "
+                         f"{gaps[p]:.6g} <= 0 beyond their radii (inadmissible state)")
+    return energy, grad, (rows[:nt], cols[:nt], vals[:nt]), n_active, min_gap
+
+
+def safe_step(pos0, dpos, topo, dhat, min_gap_fraction=0.1, tol=1e-6, max_iter=10000):
+    """Largest proven-safe fraction tau in [0, 1] of the step pos0 -> pos0 + dpos: every candidate pair keeps a
+    gap >= min_gap_fraction of its start gap, every other pair a gap > dhat, on [0, tau] (ccd.py).
+
+    Returns (tau, limiting pair (2,) or None)."""
+    pairs = candidate_pairs(pos0, topo, dhat, pos1=pos0 + dpos)
+    tau, worst, _ = pairs_ccd(pos0, dpos, topo.edges, pairs, topo.edge_radius, min_gap_fraction, tol, max_iter)
+    if tau == 0.0 and worst >= 0:
+        raise ValueError(f"safe_step: edges {pairs[worst, 0]} and {pairs[worst, 1]} already overlap at the "
+                         "start of the step")
+    return tau, (pairs[worst] if worst >= 0 else None)

@@ -1,0 +1,155 @@
+"""The IPC log barrier on the gap between two thick rods, its pair gradient and Hessian, and their assembly.
+
+Barrier (Li et al. 2020, Eq. 6):  b(z; zh) = -(z - zh)^2 log(z / zh) for 0 < z < zh, 0 for z >= zh.
+b, b' and b'' all vanish at z = zh (so the energy is C2 where pairs enter or leave the active set) and
+b -> +inf as z -> 0+.
+
+Which z. Two edges of centreline distance dist = sqrt(D) touch when dist = off = r_a + r_b (2r for one rod).
+- GAP (default): z = dist - off, zh = dhat. The barrier acts on the physical gap between the surfaces: dhat is
+  a length with a direct meaning (the range of the contact force), the force on the pair is -kappa b'(z) along
+  the closest-point normal, and the activation zone is the same shell of width dhat around every edge. dist
+  >= off > 0 on every admissible state, so sqrt(D) is smooth there (the sqrt singularity at D = 0 is never
+  reached), and dz/dD = 1 / (2 dist), d2z/dD2 = -1 / (4 dist^3).
+- SQUARED: z = D - off^2, zh = (off + dhat)^2 - off^2 = 2 off dhat + dhat^2 (same activation distance
+  off + dhat). No square root; it is IPC Toolkit's convention for a minimum distance dmin = off, which lets the
+  benchmark check our assembly against ipctk's BarrierPotential term by term. Its barrier is b of a quantity
+  (dist - off)(dist + off) ~ 2 off (dist - off) near contact: the same log singularity, a different shape.
+Both: E = kappa b(z), dE/dx = kappa b'(z) z' dD/dx, d2E/dx2 = kappa [(b'' z'^2 + b' z'') dD dD^T + b' z' d2D].
+
+Units: D in length^2, dhat in length, kappa in energy / (unit of b) (b has units z^2: length^2 in GAP mode,
+length^4 in SQUARED mode). Layout: positions (n_nodes, 3); edges (n_edges, 2) node indices; pairs (n_pairs, 2)
+edge indices; node_dof (n_nodes,) index of each node's x coordinate in the global DOF vector (y, z follow).
+"""
+import numpy as np
+from numba import njit
+
+from .distance import segment_distance2_derivatives
+
+GAP, SQUARED = 0, 1
+
+
+@njit(cache=True)
+def barrier(z, zh):
+    """b(z) = -(z - zh)^2 log(z / zh) for 0 < z < zh; 0 beyond; +inf for z <= 0."""
+    if z >= zh:
+        return 0.0
+    if z <= 0.0:
+        return np.inf
+    return -(z - zh) ** 2 * np.log(z / zh)
+
+
+@njit(cache=True)
+def barrier_first_derivative(z, zh):
+    """b'(z) = (zh - z) (2 log(z / zh) - zh / z + 1); 0 beyond zh."""
+    if z >= zh:
+        return 0.0
+    return (zh - z) * (2.0 * np.log(z / zh) - zh / z + 1.0)
+
+
+@njit(cache=True)
+def barrier_second_derivative(z, zh):
+    """b''(z) = (zh / z + 2) zh / z - 2 log(z / zh) - 3; 0 beyond zh."""
+    if z >= zh:
+        return 0.0
+    q = zh / z
+    return (q + 2.0) * q - 2.0 * np.log(z / zh) - 3.0
+
+
+@njit(cache=True)
+def gap_variable(D, off, dhat, mode):
+    """(z, zh, dz/dD, d2z/dD2) for the squared distance D, offset off = r_a + r_b and activation gap dhat."""
+    if mode == GAP:
+        dist = np.sqrt(D)
+        return dist - off, dhat, 0.5 / dist, -0.25 / (dist * D)
+    return D - off * off, 2.0 * off * dhat + dhat * dhat, 1.0, 0.0
+
+
+@njit(cache=True)
+def project_psd(H):
+    """Symmetric H with its negative eigenvalues set to zero (in place); H (m, m)."""
+    w, V = np.linalg.eigh(H)
+    if w[0] >= 0.0:
+        return
+    m = H.shape[0]
+    H[:, :] = 0.0
+    for k in range(m):
+        if w[k] > 0.0:
+            for i in range(m):
+                vik = w[k] * V[i, k]
+                for j in range(m):
+                    H[i, j] += vik * V[j, k]
+
+
+@njit(cache=True)
+def pair_barrier(x, off, dhat, kappa, mode, project, grad, hess):
+    """Barrier energy of one edge pair x = [a0, a1, b0, b1] (12,); writes its gradient (12,) and Hessian
+    (12, 12) (eigen-clamped to PSD if ``project``). Returns (energy, gap z); energy is +inf if z <= 0 and 0 with
+    zero derivatives if the pair is beyond the activation distance."""
+    dD = np.empty(12)
+    HD = np.empty((12, 12))
+    D, region = segment_distance2_derivatives(x, dD, HD)
+    z, zh, z1, z2 = gap_variable(D, off, dhat, mode)
+    if z >= zh:
+        grad[:] = 0.0
+        hess[:, :] = 0.0
+        return 0.0, z
+    if z <= 0.0:
+        grad[:] = 0.0
+        hess[:, :] = 0.0
+        return np.inf, z
+    b1 = barrier_first_derivative(z, zh)
+    b2 = barrier_second_derivative(z, zh)
+    c1 = kappa * b1 * z1
+    c2 = kappa * (b2 * z1 * z1 + b1 * z2)
+    for m in range(12):
+        grad[m] = c1 * dD[m]
+        for n in range(12):
+            hess[m, n] = c2 * dD[m] * dD[n] + c1 * HD[m, n]
+    if project:
+        project_psd(hess)
+    return kappa * barrier(z, zh), z
+
+
+@njit(cache=True)
+def assemble_pairs(pos, edges, pairs, edge_radius, dhat, kappa, mode, project, node_dof,
+                   grad_out, rows, cols, vals):
+    """Add the barrier of every pair in ``pairs`` to grad_out (n_dof,) and write its Hessian blocks as COO
+    triplets into rows, cols, vals (each of length >= 144 * n_pairs).
+
+    Returns (energy, n_active, n_triplets, min_gap). energy is +inf if any pair has z <= 0 (an inadmissible
+    state: the caller must reject it)."""
+    x = np.empty(12)
+    g = np.empty(12)
+    H = np.empty((12, 12))
+    dof = np.empty(12, dtype=np.int64)
+    energy = 0.0
+    n_active = 0
+    nt = 0
+    min_gap = np.inf
+    for p in range(pairs.shape[0]):
+        ea, eb = pairs[p, 0], pairs[p, 1]
+        nodes = (edges[ea, 0], edges[ea, 1], edges[eb, 0], edges[eb, 1])
+        for k in range(4):
+            for i in range(3):
+                x[3 * k + i] = pos[nodes[k], i]
+                dof[3 * k + i] = node_dof[nodes[k]] + i
+        off = edge_radius[ea] + edge_radius[eb]
+        e, z = pair_barrier(x, off, dhat, kappa, mode, project, g, H)
+        if mode == GAP:
+            gap = z
+        else:
+            gap = np.sqrt(z + off * off) - off
+        if gap < min_gap:
+            min_gap = gap
+        if e == 0.0 and gap >= dhat:
+            continue
+        energy += e
+        n_active += 1
+        for m in range(12):
+            grad_out[dof[m]] += g[m]
+            for n in range(12):
+                rows[nt] = dof[m]
+                cols[nt] = dof[n]
+                vals[nt] = H[m, n]
+                nt += 1
+    return energy, n_active, nt, min_gap

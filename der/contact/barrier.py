@@ -23,7 +23,7 @@ edge indices; node_dof (n_nodes,) index of each node's x coordinate in the globa
 import numpy as np
 from numba import njit
 
-from .distance import segment_distance2_derivatives
+from .distance import closest_parameters, segment_distance2_derivatives
 
 GAP, SQUARED = 0, 1
 
@@ -81,6 +81,137 @@ def project_psd(H):
 
 
 @njit(cache=True)
+def pair_subspace(x, Q):
+    """Orthonormal basis Q[:, :k] (12, <=5) of a subspace holding the range of every pair Hessian at x.
+
+    With r = sum_k ca_k p_k the closest-point difference (distance.py), dD = 2 (ca x I)^T r, J^T J = (ca ca^T) x I
+    and the mixed terms are ca x u + ds x r, ca x v + dt x r (x: Kronecker product; ds = (-1, 1, 0, 0),
+    dt = (0, 0, -1, 1)), so the barrier Hessian of the pair lives in span{ca x e_i (i = 1..3), ds x r, dt x r}.
+    Returns k."""
+    D, s, t, region = closest_parameters(x)
+    c0, c1, c2, c3 = 1.0 - s, s, t - 1.0, -t
+    r0 = c0 * x[0] + c1 * x[3] + c2 * x[6] + c3 * x[9]
+    r1 = c0 * x[1] + c1 * x[4] + c2 * x[7] + c3 * x[10]
+    r2 = c0 * x[2] + c1 * x[5] + c2 * x[8] + c3 * x[11]
+    Q[:, :] = 0.0
+    # columns 0..2: ca x e_i, mutually orthogonal, norm |ca|
+    nca = np.sqrt(c0 * c0 + c1 * c1 + c2 * c2 + c3 * c3)
+    for i in range(3):
+        Q[i, i], Q[3 + i, i], Q[6 + i, i], Q[9 + i, i] = c0 / nca, c1 / nca, c2 / nca, c3 / nca
+    k = 3
+    rr = (r0, r1, r2)
+    for c in range(2):                         # ds x r, dt x r, Gram-Schmidt against the columns so far
+        v = np.zeros(12)
+        lo = 6 * c
+        for i in range(3):
+            v[lo + i] = -rr[i]
+            v[lo + 3 + i] = rr[i]
+        n0 = 0.0
+        for m in range(12):
+            n0 += v[m] * v[m]
+        for j in range(k):
+            d = 0.0
+            for m in range(12):
+                d += Q[m, j] * v[m]
+            for m in range(12):
+                v[m] -= d * Q[m, j]
+        nv = 0.0
+        for m in range(12):
+            nv += v[m] * v[m]
+        if nv > 1e-20 * n0:
+            nv = np.sqrt(nv)
+            for m in range(12):
+                Q[m, k] = v[m] / nv
+            k += 1
+    return k
+
+
+@njit(cache=True)
+def jacobi_eigh(M, V, k):
+    """Eigen-decomposition of the symmetric k x k block M[:k, :k] by cyclic Jacobi rotations (in place):
+    on return diag(M) holds the eigenvalues and V[:k, :k] the eigenvectors (columns). For the tiny blocks
+    of pair Hessians this is several times faster than a LAPACK call from numba. At most 50 sweeps (it
+    converges quadratically, in ~6 for k = 5)."""
+    for i in range(k):
+        for j in range(k):
+            V[i, j] = 1.0 if i == j else 0.0
+    for sweep in range(50):
+        off = 0.0
+        scale = 0.0
+        for i in range(k):
+            scale += M[i, i] * M[i, i]
+            for j in range(i + 1, k):
+                off += M[i, j] * M[i, j]
+        if off <= 1e-30 * scale or off == 0.0:
+            return
+        for p in range(k - 1):
+            for q in range(p + 1, k):
+                apq = M[p, q]
+                if apq == 0.0:
+                    continue
+                theta = (M[q, q] - M[p, p]) / (2.0 * apq)
+                t = (1.0 if theta >= 0.0 else -1.0) / (abs(theta) + np.sqrt(theta * theta + 1.0))
+                c = 1.0 / np.sqrt(t * t + 1.0)
+                s = t * c
+                for i in range(k):             # M <- M G (columns p, q)
+                    mip, miq = M[i, p], M[i, q]
+                    M[i, p] = c * mip - s * miq
+                    M[i, q] = s * mip + c * miq
+                for i in range(k):             # M <- G^T M (rows p, q)
+                    mpi, mqi = M[p, i], M[q, i]
+                    M[p, i] = c * mpi - s * mqi
+                    M[q, i] = s * mpi + c * mqi
+                for i in range(k):
+                    vip, viq = V[i, p], V[i, q]
+                    V[i, p] = c * vip - s * viq
+                    V[i, q] = s * vip + c * viq
+
+
+@njit(cache=True)
+def project_psd_in_subspace(H, Q, k):
+    """Eigen-clamp symmetric H (m, m) whose range lies in span Q[:, :k] (orthonormal): the same result as
+    project_psd, from a k x k eigenproblem (k <= 5 for a pair: about 10x cheaper than the 12 x 12 one)."""
+    m = H.shape[0]
+    HQ = np.zeros((m, 5))
+    for i in range(m):
+        for j in range(k):
+            acc = 0.0
+            for l in range(m):
+                acc += H[i, l] * Q[l, j]
+            HQ[i, j] = acc
+    M = np.zeros((5, 5))
+    for i in range(k):
+        for j in range(i, k):
+            acc = 0.0
+            for l in range(m):
+                acc += Q[l, i] * HQ[l, j]
+            M[i, j] = acc
+            M[j, i] = acc
+    V = np.empty((5, 5))
+    jacobi_eigh(M, V, k)
+    negative = False
+    for j in range(k):
+        if M[j, j] < 0.0:
+            negative = True
+    if not negative:
+        return
+    B = np.zeros((m, 5))                       # B = Q V: eigenvectors in the 12 coordinates
+    for i in range(m):
+        for j in range(k):
+            acc = 0.0
+            for l in range(k):
+                acc += Q[i, l] * V[l, j]
+            B[i, j] = acc
+    for i in range(m):
+        for j in range(m):
+            acc = 0.0
+            for l in range(k):
+                if M[l, l] > 0.0:
+                    acc += M[l, l] * B[i, l] * B[j, l]
+            H[i, j] = acc
+
+
+@njit(cache=True)
 def pair_barrier(x, off, dhat, kappa, mode, project, grad, hess):
     """Barrier energy of one edge pair x = [a0, a1, b0, b1] (12,); writes its gradient (12,) and Hessian
     (12, 12) (eigen-clamped to PSD if ``project``). Returns (energy, gap z); energy is +inf if z <= 0 and 0 with
@@ -106,7 +237,8 @@ def pair_barrier(x, off, dhat, kappa, mode, project, grad, hess):
         for n in range(12):
             hess[m, n] = c2 * dD[m] * dD[n] + c1 * HD[m, n]
     if project:
-        project_psd(hess)
+        Q = np.empty((12, 5))
+        project_psd_in_subspace(hess, Q, pair_subspace(x, Q))
     return kappa * barrier(z, zh), z
 
 

@@ -6,7 +6,8 @@ import pytest
 
 from der.contact import barrier_system, candidate_pairs, safe_step, topology
 from der.contact.barrier import (
-    GAP, SQUARED, barrier, barrier_first_derivative, barrier_second_derivative, pair_barrier, project_psd,
+    GAP, SQUARED, barrier, barrier_first_derivative, barrier_second_derivative, pair_barrier, pair_subspace,
+    project_psd_in_subspace,
 )
 from der.contact.broadphase import brute_force_pairs, edge_boxes, excluded, exclusion_k, hash_grid_pairs
 from der.contact.ccd import segment_ccd
@@ -157,19 +158,32 @@ def test_pair_barrier_derivatives_by_finite_differences(mode):
     assert pair_barrier(touching, off, dhat, kappa, GAP, False, g, H)[0] == np.inf
 
 
-def test_project_psd_keeps_psd_matrices():
+def test_subspace_psd_projection_equals_full_eigen_clamping():
+    """The 5-dim projection equals numpy's eigen-clamping of the whole 12 x 12 pair Hessian, in every region."""
     rng = np.random.default_rng(4)
-    A = rng.normal(size=(12, 15))
-    H = A @ A.T                                      # positive definite: left as it is
-    Hp = H.copy()
-    project_psd(Hp)
-    assert np.array_equal(Hp, H)
-    H2 = H - 30.0 * np.outer(A[:, 0], A[:, 0])
-    w, V = np.linalg.eigh(H2)
-    assert w[0] < 0
-    expect = (V * np.clip(w, 0, None)) @ V.T
-    project_psd(H2)
-    assert np.abs(H2 - expect).max() <= 1e-12 * np.abs(expect).max()
+    off, dhat = 0.2, 0.15
+    g, H, Hp, Q = np.empty(12), np.empty((12, 12)), np.empty((12, 12)), np.empty((12, 5))
+    n_indefinite = 0
+    for x, _ in region_pairs(rng):
+        c = 0.5 * (x[0:3] + x[6:9])
+        y = c + (x.reshape(4, 3) - c) * (off + 0.5 * dhat) / np.sqrt(segment_distance2(x))
+        y = y.ravel()
+        for mode in (GAP, SQUARED):
+            pair_barrier(y, off, dhat, 1.0, mode, False, g, H)
+            k = pair_subspace(y, Q)
+            assert np.abs(H - Q[:, :k] @ Q[:, :k].T @ H @ Q[:, :k] @ Q[:, :k].T).max() <= 1e-10 * np.abs(H).max()
+            w, V = np.linalg.eigh(H)
+            n_indefinite += w[0] < -1e-8 * np.abs(w).max()
+            expect = (V * np.clip(w, 0, None)) @ V.T
+            pair_barrier(y, off, dhat, 1.0, mode, True, g, Hp)
+            assert np.abs(Hp - expect).max() <= 1e-10 * np.abs(expect).max()
+    assert n_indefinite > 10
+    # a PSD matrix in the subspace is left as it is
+    B = Q[:, :k] @ rng.normal(size=(k, k))
+    Hpsd = B @ B.T
+    H2 = Hpsd.copy()
+    project_psd_in_subspace(H2, Q, k)
+    assert np.abs(H2 - Hpsd).max() <= 1e-12 * np.abs(Hpsd).max()
 
 
 def gap_along(x0, dx, off, taus):
@@ -412,6 +426,42 @@ def test_distance_derivatives_agree_with_ipctk():
         assert abs(D - ipctk.edge_edge_distance(a0, a1, b0, b1)) <= 1e-12 * max(1.0, D)
         assert np.abs(g - ipctk.edge_edge_distance_gradient(a0, a1, b0, b1).ravel()).max() <= 1e-10 * max(1, np.abs(g).max())
         assert np.abs(H - ipctk.edge_edge_distance_hessian(a0, a1, b0, b1)).max() <= 1e-8 * max(1, np.abs(H).max())
+
+
+@needs_ipctk
+def test_ccd_of_der_and_ipctk_stop_random_fast_passages():
+    """Random crossing pairs thrown through each other at speeds up to 1e4 (segment lengths ~1): the whole
+    step passes through (sampled), and every CCD (der, ipctk additive, ipctk tight inclusion) stops before
+    the first touch."""
+    rng = np.random.default_rng(9)
+    off = 0.1
+    p = lambda y: [y[3 * k:3 * k + 3] for k in range(4)]  # noqa: E731
+    n_checked = 0
+    for _ in range(40):
+        n = rng.normal(size=3)
+        n /= np.linalg.norm(n)
+        u = np.cross(n, rng.normal(size=3))
+        v = np.cross(n, rng.normal(size=3))
+        a_mid, b_mid = rng.normal(size=3), None
+        b_mid = a_mid + n * rng.uniform(0.3, 1.0)     # b above a along n, their projections cross
+        x0 = np.concatenate([a_mid - u, a_mid + u, b_mid - v, b_mid + v])
+        if np.sqrt(segment_distance2(x0)) - off <= 0.05:
+            continue
+        dx = np.zeros(12)
+        dx[6:] = np.tile(-n * 10 ** rng.uniform(0, 4), 2) + 0.3 * rng.normal(size=6)
+        taus = np.linspace(0, 1, 4001)
+        gaps = gap_along(x0, dx, off, taus)
+        if gaps.min() >= 0:
+            continue
+        t_touch = taus[np.argmax(gaps < 0)]
+        tau, _ = segment_ccd(x0, dx, off, 0.1, 1e-6, 10000)
+        assert tau < t_touch
+        assert gap_along(x0, dx, off, np.linspace(0, tau, 500)).min() > 0
+        for ccd in (ipctk.AdditiveCCD(), ipctk.TightInclusionCCD()):
+            hit, toi = ccd.edge_edge_ccd(*p(x0), *p(x0 + dx), min_distance=off)
+            assert hit and toi < t_touch
+        n_checked += 1
+    assert n_checked > 20
 
 
 @needs_ipctk

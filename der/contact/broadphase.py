@@ -81,22 +81,61 @@ def _overlap(lo, hi, i, j):
 
 
 @njit(cache=True)
+def _argsort_heap(keys):
+    """Indices that sort the int64 keys (heapsort, O(m log m)); a hand loop because numba's np.argsort and
+    2D slice copies cost seconds of compilation each."""
+    m = keys.shape[0]
+    idx = np.arange(m)
+    for start in range(m // 2 - 1, -1, -1):
+        _sift(keys, idx, start, m)
+    for end in range(m - 1, 0, -1):
+        idx[0], idx[end] = idx[end], idx[0]
+        _sift(keys, idx, 0, end)
+    return idx
+
+
+@njit(cache=True)
+def _sift(keys, idx, root, end):
+    while True:
+        child = 2 * root + 1
+        if child >= end:
+            return
+        if child + 1 < end and keys[idx[child + 1]] > keys[idx[child]]:
+            child += 1
+        if keys[idx[child]] <= keys[idx[root]]:
+            return
+        idx[root], idx[child] = idx[child], idx[root]
+        root = child
+
+
+@njit(cache=True)
+def _trimmed(out, n):
+    res = np.empty((n, 2), dtype=np.int64)
+    for i in range(n):
+        res[i, 0] = out[i, 0]
+        res[i, 1] = out[i, 1]
+    return res
+
+
+@njit(cache=True)
 def hash_grid_pairs(lo, hi, rod_of_edge, local_edge, rod_n_edges, rod_closed, rod_k):
     """All non-excluded edge pairs whose boxes overlap (see module docstring). Returns (n_pairs, 2) int64."""
     n = lo.shape[0]
     if n < 2:
         return np.empty((0, 2), dtype=np.int64)
     cell = 0.0
-    gmin = np.empty(3)
-    for a in range(3):
-        gmin[a] = lo[:, a].min()
-        for e in range(n):
+    gmin = np.full(3, np.inf)
+    gmax = np.full(3, -np.inf)
+    for e in range(n):
+        for a in range(3):
+            gmin[a] = min(gmin[a], lo[e, a])
+            gmax[a] = max(gmax[a], hi[e, a])
             cell = max(cell, hi[e, a] - lo[e, a])
     if not cell > 0.0:
         cell = 1.0
     dims = np.empty(3, dtype=np.int64)
     for a in range(3):
-        dims[a] = int((hi[:, a].max() - gmin[a]) / cell) + 2
+        dims[a] = int((gmax[a] - gmin[a]) / cell) + 2
     c0 = np.empty((n, 3), dtype=np.int64)
     c1 = np.empty((n, 3), dtype=np.int64)
     count = 0
@@ -117,7 +156,7 @@ def hash_grid_pairs(lo, hi, rod_of_edge, local_edge, rod_n_edges, rod_closed, ro
                     keys[q] = (cx * dims[1] + cy) * dims[2] + cz
                     owner[q] = e
                     q += 1
-    order = np.argsort(keys, kind="mergesort")
+    order = _argsort_heap(keys)
     out = np.empty((max(16, 4 * n), 2), dtype=np.int64)
     npairs = 0
     start = 0
@@ -143,13 +182,15 @@ def hash_grid_pairs(lo, hi, rod_of_edge, local_edge, rod_n_edges, rod_closed, ro
                     continue
                 if npairs == out.shape[0]:
                     grown = np.empty((2 * out.shape[0], 2), dtype=np.int64)
-                    grown[:npairs] = out[:npairs]
+                    for q2 in range(npairs):
+                        grown[q2, 0] = out[q2, 0]
+                        grown[q2, 1] = out[q2, 1]
                     out = grown
                 out[npairs, 0] = min(i, j)
                 out[npairs, 1] = max(i, j)
                 npairs += 1
         start = stop
-    return out[:npairs].copy()
+    return _trimmed(out, npairs)
 
 
 @njit(cache=True)
@@ -165,4 +206,4 @@ def brute_force_pairs(lo, hi, rod_of_edge, local_edge, rod_n_edges, rod_closed, 
                 out[npairs, 0] = i
                 out[npairs, 1] = j
                 npairs += 1
-    return out[:npairs].copy()
+    return _trimmed(out, npairs)

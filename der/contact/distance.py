@@ -113,7 +113,7 @@ def segment_distance2_derivatives(x, grad, hess):
     for k in range(4):
         for i in range(3):
             grad[3 * k + i] = 2.0 * ca[k] * r[i]
-    hess[:, :] = 0.0
+    hess.fill(0.0)
     for k in range(4):
         for l in range(4):
             c2 = 2.0 * ca[k] * ca[l]

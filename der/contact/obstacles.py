@@ -66,8 +66,8 @@ def edge_obstacle_barrier(pos, a, b, kind, params, radius, dhat, kappa, grad6, h
     D, region = segment_distance2_derivatives(x, dD, HD)
     dist = np.sqrt(D)
     z = dist - params[6] - radius
-    grad6[:] = 0.0
-    hess6[:, :] = 0.0
+    grad6.fill(0.0)
+    hess6.fill(0.0)
     if z >= dhat:
         return 0.0, z
     if z <= 0.0:
@@ -83,15 +83,25 @@ def edge_obstacle_barrier(pos, a, b, kind, params, radius, dhat, kappa, grad6, h
             hess6[m, n] = c2 * dD[m] * dD[n] + c1 * HD[m, n]
     if proj:
         # chain rule through x -> P x on each node: g <- P g, H <- P H P (blockwise)
-        P = np.eye(3)
-        for i in range(3):
-            for j in range(3):
-                P[i, j] -= axis[i] * axis[j]
         T = np.zeros((6, 6))
-        T[0:3, 0:3] = P
-        T[3:6, 3:6] = P
-        grad6[:] = T @ grad6
-        hess6[:, :] = T @ hess6 @ T
+        for blk in range(2):
+            for i in range(3):
+                for j in range(3):
+                    T[3 * blk + i, 3 * blk + j] = (1.0 if i == j else 0.0) - axis[i] * axis[j]
+        g = np.zeros(6)
+        TH = np.zeros((6, 6))
+        for i in range(6):
+            for l in range(6):
+                g[i] += T[i, l] * grad6[l]
+                for j in range(6):
+                    TH[i, j] += T[i, l] * hess6[l, j]
+        for i in range(6):
+            grad6[i] = g[i]
+            for j in range(6):
+                acc = 0.0
+                for l in range(6):
+                    acc += TH[i, l] * T[l, j]
+                hess6[i, j] = acc
     return kappa * barrier(z, dhat), z
 
 
@@ -102,8 +112,8 @@ def node_plane_barrier(x, params, radius, dhat, kappa, grad3, hess3):
     z = -radius
     for i in range(3):
         z += (x[i] - params[i]) * params[3 + i]
-    grad3[:] = 0.0
-    hess3[:, :] = 0.0
+    grad3.fill(0.0)
+    hess3.fill(0.0)
     if z >= dhat:
         return 0.0, z
     if z <= 0.0:

@@ -12,7 +12,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .barrier import GAP, SQUARED, assemble_pairs, pair_barrier  # noqa: F401
+from .barrier import GAP, SQUARED, active_pairs, assemble_pairs, pair_barrier  # noqa: F401
 from .broadphase import edge_boxes, exclusion_k, hash_grid_pairs, swept_edge_boxes  # noqa: F401
 from .ccd import pairs_ccd, segment_ccd  # noqa: F401
 from .distance import segment_distance2, segment_distance2_derivatives  # noqa: F401
@@ -75,8 +75,10 @@ def candidate_pairs(pos, topo, dhat, pos1=None):
 def barrier_system(pos, topo, pairs, dhat, kappa, node_dof, n_dof, mode=GAP, project=True):
     """Barrier energy, gradient (n_dof,) and Hessian COO triplets (rows, cols, vals) of the pairs.
 
-    Returns (energy, grad, (rows, cols, vals), n_active, min_gap). Raises ValueError if a pair's gap is <= 0
+    Returns (energy, grad, (rows, cols, vals), n_active, min_gap); min_gap is over the active pairs (inf if
+    none is within dhat). Raises ValueError if a pair's gap is <= 0
     (an inadmissible state, naming the two edges)."""
+    pairs = active_pairs(pos, topo.edges, pairs, topo.edge_radius, dhat)
     n_p = pairs.shape[0]
     grad = np.zeros(n_dof)
     rows = np.empty(144 * n_p, dtype=np.int64)

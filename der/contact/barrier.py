@@ -23,7 +23,7 @@ edge indices; node_dof (n_nodes,) index of each node's x coordinate in the globa
 import numpy as np
 from numba import njit
 
-from .distance import closest_parameters, segment_distance2_derivatives
+from .distance import closest_parameters, segment_distance2, segment_distance2_derivatives
 
 GAP, SQUARED = 0, 1
 
@@ -225,6 +225,33 @@ def pair_barrier(x, off, dhat, kappa, mode, project, grad, hess):
         Q = np.empty((12, 5))
         project_psd_in_subspace(hess, Q, pair_subspace(x, Q))
     return kappa * barrier(z, zh), z
+
+
+@njit(cache=True)
+def active_pairs(pos, edges, pairs, edge_radius, dhat):
+    """The rows of pairs (n_pairs, 2) whose gap is below dhat (the barrier's support), so that the triplet
+    buffers can be sized to the active set rather than to all candidates."""
+    keep = np.zeros(pairs.shape[0], dtype=np.bool_)
+    x = np.empty(12)
+    n = 0
+    for p in range(pairs.shape[0]):
+        ea, eb = pairs[p, 0], pairs[p, 1]
+        nodes = (edges[ea, 0], edges[ea, 1], edges[eb, 0], edges[eb, 1])
+        for k in range(4):
+            for i in range(3):
+                x[3 * k + i] = pos[nodes[k], i]
+        off = edge_radius[ea] + edge_radius[eb]
+        if np.sqrt(segment_distance2(x)) - off < dhat:
+            keep[p] = True
+            n += 1
+    out = np.empty((n, 2), dtype=np.int64)
+    q = 0
+    for p in range(pairs.shape[0]):
+        if keep[p]:
+            out[q, 0] = pairs[p, 0]
+            out[q, 1] = pairs[p, 1]
+            q += 1
+    return out
 
 
 @njit(cache=True)

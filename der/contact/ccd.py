@@ -15,7 +15,7 @@ within [0, tau_safe], however fast or large the step (no sampling, no tunnelling
 default 0.1) is ipctk's 1 - conservative_rescaling.
 
 Termination: the loop stops when the remaining margin g(tau) - g_t is below ``tol`` (1e-6) of its initial
-value (tau is then the time of impact with the target, from below), or tau reaches 1, or after ``max_iter``
+value (tau is then the time of impact with the target, from below), or tau reaches tmax (1 by default), or after ``max_iter``
 (default 10000) iterations, returning the tau reached (still safe, only more conservative). Pairs that slide
 fast past each other at constant gap need about L / ((1 - f) g) iterations per unit step.
 
@@ -54,9 +54,11 @@ def _relative_speed_bound(dx):
 
 
 @njit(cache=True)
-def segment_ccd(x0, dx, off, min_gap_fraction, tol, max_iter):
+def segment_ccd(x0, dx, off, min_gap_fraction, tol, max_iter, tmax=1.0):
     """Safe step fraction tau in [0, 1] for segments x0 = [a0, a1, b0, b1] (12,) moving by dx (12,), offset
     off = r_a + r_b: the gap dist - off stays >= min_gap_fraction * (its value at tau = 0) on [0, tau].
+    The search ends at ``tmax`` (<= 1): a caller that already has a smaller bound from another pair passes it,
+    and pairs that cannot lower it stop early.
 
     Returns (tau, iterations). tau = 0 with iterations = -1 if the start already violates the gap (g0 <= 0)."""
     L = _relative_speed_bound(dx)
@@ -64,7 +66,7 @@ def segment_ccd(x0, dx, off, min_gap_fraction, tol, max_iter):
     if g0 <= 0.0:
         return 0.0, -1
     if L == 0.0:
-        return 1.0, 0
+        return tmax, 0
     target = min_gap_fraction * g0
     margin0 = g0 - target
     tau = 0.0
@@ -75,9 +77,9 @@ def segment_ccd(x0, dx, off, min_gap_fraction, tol, max_iter):
         if margin <= tol * margin0:
             return tau, it
         delta = margin / L
-        if tau + delta >= 1.0:
-            # the bound holds on the whole rest of the step
-            return 1.0, it + 1
+        if tau + delta >= tmax:
+            # the bound holds on the whole rest of [0, tmax]
+            return tmax, it + 1
         tau += delta
         for m in range(12):
             x[m] = x0[m] + tau * dx[m]
@@ -87,8 +89,8 @@ def segment_ccd(x0, dx, off, min_gap_fraction, tol, max_iter):
 
 @njit(cache=True)
 def pairs_ccd(pos0, dpos, edges, pairs, edge_radius, min_gap_fraction, tol, max_iter):
-    """Smallest segment_ccd tau over the candidate pairs (n_pairs, 2). Returns (tau, index of the limiting
-    pair or -1, total iterations). tau = 0 and the pair's index if a pair starts inadmissible."""
+    """Smallest segment_ccd tau over the candidate pairs (n_pairs, 2), each pair searched only up to the
+    smallest bound found so far. Returns (tau, index of the limiting pair or -1, total iterations). tau = 0 and the pair's index if a pair starts inadmissible."""
     x0 = np.empty(12)
     dx = np.empty(12)
     tau_min = 1.0
@@ -101,7 +103,8 @@ def pairs_ccd(pos0, dpos, edges, pairs, edge_radius, min_gap_fraction, tol, max_
             for i in range(3):
                 x0[3 * k + i] = pos0[nodes[k], i]
                 dx[3 * k + i] = dpos[nodes[k], i]
-        tau, it = segment_ccd(x0, dx, edge_radius[ea] + edge_radius[eb], min_gap_fraction, tol, max_iter)
+        tau, it = segment_ccd(x0, dx, edge_radius[ea] + edge_radius[eb], min_gap_fraction, tol, max_iter,
+                              tau_min)
         if it < 0:
             return 0.0, p, total
         total += it

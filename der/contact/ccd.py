@@ -15,9 +15,10 @@ within [0, tau_safe], however fast or large the step (no sampling, no tunnelling
 default 0.1) is ipctk's 1 - conservative_rescaling.
 
 Termination: the loop stops when the remaining margin g(tau) - g_t is below ``tol`` (1e-6) of its initial
-value (tau is then the time of impact with the target, from below), or tau reaches tmax (1 by default), or after ``max_iter``
-(default 10000) iterations, returning the tau reached (still safe, only more conservative). Pairs that slide
-fast past each other at constant gap need about L / ((1 - f) g) iterations per unit step.
+value (tau is then the time of impact with the target, from below), or tau reaches tmax (1 by default), or
+after ``max_iter`` (default 10000) iterations, returning the tau reached (still safe, only more
+conservative). Pairs that slide fast past each other at constant gap need about L / ((1 - f) g) iterations
+per unit step.
 
 Layout as in barrier.py; dpos (n_nodes, 3) is the displacement of the full step.
 """
@@ -90,7 +91,8 @@ def segment_ccd(x0, dx, off, min_gap_fraction, tol, max_iter, tmax=1.0):
 @njit(cache=True)
 def pairs_ccd(pos0, dpos, edges, pairs, edge_radius, min_gap_fraction, tol, max_iter):
     """Smallest segment_ccd tau over the candidate pairs (n_pairs, 2), each pair searched only up to the
-    smallest bound found so far. Returns (tau, index of the limiting pair or -1, total iterations). tau = 0 and the pair's index if a pair starts inadmissible."""
+    smallest bound found so far. Returns (tau, index of the limiting pair or -1, total iterations);
+    tau = 0 and that pair's index if a pair starts inadmissible."""
     x0 = np.empty(12)
     dx = np.empty(12)
     tau_min = 1.0

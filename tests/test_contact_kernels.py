@@ -265,9 +265,11 @@ def test_broad_phase_matches_brute_force_with_exclusion_and_ring_wrap():
     lo, hi = np.empty((m, 3)), np.empty((m, 3))
     edge_boxes(pos, topo.edges, topo.edge_radius + 0.5 * dhat, lo, hi)
     args = (topo.rod_of_edge, topo.local_edge, topo.rod_n_edges, topo.rod_closed, topo.rod_k)
-    grid = {tuple(p) for p in hash_grid_pairs(lo, hi, *args)}
+    grid_list = hash_grid_pairs(lo, hi, *args)
+    grid = {tuple(p) for p in grid_list}
     brute = {tuple(p) for p in brute_force_pairs(lo, hi, *args)}
     assert grid == brute and len(grid) > 50
+    assert len(grid_list) == len(grid) and np.all(grid_list[:, 0] < grid_list[:, 1])   # each pair once
     # distances: broad phase + exact gap filter == all non-neighbour pairs within the cutoff, by brute force
     pairs = candidate_pairs(pos, topo, dhat)
 
@@ -477,3 +479,39 @@ def test_ccd_agrees_with_ipctk_on_passages():
     tau, _ = segment_ccd(x0, dx, off, 0.1, 1e-6, 10000)
     t_contact = (1.0 - off) / 2e3
     assert hit and toi < t_contact and tau < t_contact
+
+
+def test_python_layer_rejects_bad_input_before_work():
+    topo = topology([(4, False, 0.1, 1.0)], 0.05)
+    pos = np.stack([np.arange(5.0), np.zeros(5), np.zeros(5)], 1)
+    with pytest.raises(ValueError, match="pos must be an"):
+        candidate_pairs(pos[:3], topo, 0.05)
+    bad = pos.copy()
+    bad[2, 1] = np.nan
+    with pytest.raises(ValueError, match="non-finite"):
+        candidate_pairs(bad, topo, 0.05)
+    with pytest.raises(TypeError, match="float64"):
+        candidate_pairs(pos.astype(np.float32), topo, 0.05)
+    with pytest.raises(ValueError, match="dhat"):
+        candidate_pairs(pos, topo, -1.0)
+    pairs = candidate_pairs(pos, topo, 0.05)
+    for kw, msg in (({"kappa": 0.0}, "kappa"), ({"dhat": np.inf}, "dhat"), ({"mode": 7}, "mode")):
+        args = {"dhat": 0.05, "kappa": 1.0, "mode": GAP} | kw
+        with pytest.raises(ValueError, match=msg):
+            barrier_system(pos, topo, pairs, args["dhat"], args["kappa"], 4 * np.arange(5), 20, mode=args["mode"])
+    with pytest.raises(ValueError, match="node_dof"):
+        barrier_system(pos, topo, pairs, 0.05, 1.0, 4 * np.arange(5), 12)
+    with pytest.raises(ValueError, match="min_gap_fraction"):
+        safe_step(pos, np.zeros_like(pos), topo, 0.05, min_gap_fraction=1.0)
+    with pytest.raises(ValueError, match="dpos"):
+        safe_step(pos, np.zeros((4, 3)), topo, 0.05)
+    with pytest.raises(ValueError, match="positive integer"):
+        topology([(0, False, 0.1, 1.0)], 0.05)
+
+
+def test_import_der_does_not_load_contact():
+    import subprocess
+    import sys
+    code = "import sys, der; assert not any(m.startswith('der.contact') for m in sys.modules), 'loaded'"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr

@@ -58,9 +58,31 @@ def topology(rods, dhat):
                            np.array(ks, dtype=np.int64), np.concatenate(radius))
 
 
+def _positive(name, value, caller):
+    if not (isinstance(value, (int, float, np.floating, np.integer)) and np.isfinite(value) and value > 0):
+        raise ValueError(f"{caller}: {name} must be a positive finite number, got {value!r}")
+
+
+def _positions(name, pos, topo, caller):
+    pos = np.asarray(pos)
+    n_nodes = int(topo.edges.max()) + 1 if topo.edges.size else 0
+    if pos.ndim != 2 or pos.shape[1] != 3 or pos.shape[0] < n_nodes:
+        raise ValueError(f"{caller}: {name} must be an (n_nodes >= {n_nodes}, 3) array, got shape {pos.shape}")
+    if pos.dtype != np.float64:
+        raise TypeError(f"{caller}: {name} must be float64, got {pos.dtype}")
+    if not np.all(np.isfinite(pos)):
+        raise ValueError(f"{caller}: {name} has non-finite entries")
+    return np.ascontiguousarray(pos)
+
+
 def candidate_pairs(pos, topo, dhat, pos1=None):
     """Edge pairs that may be within the barrier range (gap < dhat) at pos, or, with pos1, at any time of the
     linear step pos -> pos1 (boxes swept over the step). Neighbours along a rod are excluded."""
+    if not (np.isfinite(dhat) and dhat >= 0):
+        raise ValueError(f"candidate_pairs: dhat must be finite and >= 0, got {dhat!r}")
+    pos = _positions("pos", pos, topo, "candidate_pairs")
+    if pos1 is not None:
+        pos1 = _positions("pos1", pos1, topo, "candidate_pairs")
     inflate = topo.edge_radius + 0.5 * dhat
     m = topo.edges.shape[0]
     lo, hi = np.empty((m, 3)), np.empty((m, 3))
@@ -78,6 +100,15 @@ def barrier_system(pos, topo, pairs, dhat, kappa, node_dof, n_dof, mode=GAP, pro
     Returns (energy, grad, (rows, cols, vals), n_active, min_gap); min_gap is over the active pairs (inf if
     none is within dhat). Raises ValueError if a pair's gap is <= 0
     (an inadmissible state, naming the two edges)."""
+    _positive("dhat", dhat, "barrier_system")
+    _positive("kappa", kappa, "barrier_system")
+    if mode not in (GAP, SQUARED):
+        raise ValueError(f"barrier_system: mode must be GAP (0) or SQUARED (1), got {mode!r}")
+    pos = _positions("pos", pos, topo, "barrier_system")
+    node_dof = np.asarray(node_dof, dtype=np.int64)
+    if node_dof.shape != (pos.shape[0],) or node_dof.min() < 0 or node_dof.max() + 3 > n_dof:
+        raise ValueError(f"barrier_system: node_dof must hold one index per node (shape ({pos.shape[0]},)) with "
+                         f"x, y, z inside n_dof = {n_dof}")
     pairs = active_pairs(pos, topo.edges, pairs, topo.edge_radius, dhat)
     n_p = pairs.shape[0]
     grad = np.zeros(n_dof)
@@ -100,6 +131,12 @@ def safe_step(pos0, dpos, topo, dhat, min_gap_fraction=0.1, tol=1e-6, max_iter=1
     gap >= min_gap_fraction of its start gap, every other pair a gap > dhat, on [0, tau] (ccd.py).
 
     Returns (tau, limiting pair (2,) or None)."""
+    if not (0.0 < min_gap_fraction < 1.0):
+        raise ValueError(f"safe_step: min_gap_fraction must lie in (0, 1), got {min_gap_fraction!r}")
+    pos0 = _positions("pos0", pos0, topo, "safe_step")
+    dpos = _positions("dpos", dpos, topo, "safe_step")
+    if dpos.shape != pos0.shape:
+        raise ValueError(f"safe_step: dpos has shape {dpos.shape}, pos0 {pos0.shape}")
     pairs = candidate_pairs(pos0, topo, dhat, pos1=pos0 + dpos)
     tau, worst, _ = pairs_ccd(pos0, dpos, topo.edges, pairs, topo.edge_radius, min_gap_fraction, tol, max_iter)
     if tau == 0.0 and worst >= 0:

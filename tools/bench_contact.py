@@ -197,7 +197,9 @@ def main(argv=None):
     hdr = (f"{'n':>6} {'cand':>6} {'active':>6} | {'broad der':>9} {'ipctk':>9} {'x':>5} | {'barrier der':>11} "
            f"{'ipctk':>9} {'x':>5} | {'ccd der':>9} {'accd':>9} {'x':>5} {'tight':>9} {'x':>5} | "
            f"{'pair der us':>11} {'ipctk us':>8} {'x':>5}")
-    print(hdr)
+    short = (f"{'n':>6} {'cand':>6} {'active':>6} | {'broad der':>9} | {'barrier der':>11} | {'ccd der':>9} | "
+             f"{'pair der us':>11}")
+    print(hdr if ipctk is not None else short)
     for w in rows:
         if ipctk is None:
             print(f"{w['n']:>6} {w['candidates']:>6} {w['active_pairs']:>6} | {w['der_broad_s']:9.2e} | "
@@ -209,6 +211,11 @@ def main(argv=None):
               f"{w['ipctk_accd_s']:9.2e} {w['ratio_ccd_accd']:5.1f} {w['ipctk_tight_s']:9.2e} "
               f"{w['ratio_ccd_tight']:5.1f} | {w['der_per_pair_us']:11.3f} {w['ipctk_per_pair_us']:8.2f} "
               f"{w['ratio_per_pair']:5.0f}")
+    if ipctk is None:
+        for w in rows:
+            print(f"{w['n']:>6} tau {w['der_tau']:.4f} min gap/2r on [0, tau] "
+                  f"{w['der_tau_min_gap'] / (2 * w['radius']):.4f} first call {w['der_first_call_s']:.2f} s")
+        return
     print("# x = ipctk time / der time (> 1: der faster)")
     print(f"{'n':>6} {'E rel':>9} {'grad rel':>9} {'hess rel':>9} {'ipctk act':>9} | {'tau der':>8} {'accd':>8} "
           f"{'tight':>8} | min gap/2r on [0, tau]: {'der':>8} {'accd':>8} {'tight':>8} | first call s")

@@ -1,0 +1,792 @@
+"""Continuation: follow an equilibrium as a parameter of the scene changes, around folds, with its stability.
+
+``der.continuation(scene_of, p0, ...)`` follows the equilibria of ``scene_of(p)`` (a function of one float
+returning a ``der.Scene``: a load, a support motion, an imposed twist, a natural strain, a stiffness ...) from
+``p0``. Pseudo-arclength continuation (Keller): the unknowns are the state q and the parameter p together, and
+each new point x = (q, p) solves
+
+    R(q, p) = 0                          (the free DOFs' force balance, R = f_ext - dE/dq)
+    <t, x - x_pred> = 0                  (on the hyperplane through the predictor x_pred = x_k + ds t, normal to t)
+
+by Newton's method on the bordered system. With K = d(grad - f_ext)/dq (the solver's banded force Jacobian)
+and R_p = dR/dp (a central difference of the residual in p), each Newton step factorises K once and solves
+K a = R, K b = R_p; then dp = -(N + <t_q, a>) / (<t_q, b> + w_p t_p), dq = a + dp b (block elimination of
+the bordered matrix). The tangent t at a converged point is (b, 1) t_p, normalised, oriented by the previous
+tangent; its p component dp/ds changes sign at a fold, so folds are passed (and told from bifurcations).
+
+<u, v> weighs node coordinates by 1/L^2 and angles by 1 (averaged over the DOFs) and the parameter by
+1/p_scale^2: an arclength step ``ds`` is dimensionless. Rigid motions an unconstrained rod is free to make
+(those the stiffness annihilates) are projected out of every step; they are not part of the branch.
+
+Stability at every point comes from ``der.check_stability`` (its ``min_eigenvalue``: the real part of the
+lowest eigenvalue of the constrained stiffness pencil). Between two points where dp/ds changes sign there is a
+fold; where the stability changes without a fold, a bifurcation (or a Hopf-type crossing, when the crossing
+eigenvalue is complex). Both are located by a secant (Illinois) search on the arclength of the step: the root
+of dp/ds for a fold, of the lowest eigenvalue for a bifurcation. ``Branch.switch`` starts the bifurcated
+branch along the critical eigenvector.
+
+``method="natural"`` is the simpler natural-parameter continuation: p steps, each point a ``der.solve`` warm
+started from a secant predictor. It stops at a fold.
+"""
+import csv
+import io
+import json
+import math
+import sys
+import time
+
+import numpy as np
+
+from .scene import Scene
+
+METHODS = ("arclength", "natural")
+KINDS = ("fold", "bifurcation", "hopf")
+GAUGE_REGULARISATION = 1e-12   # times diag|K|, only when the rod has free rigid motions (they are projected out)
+GAUGE_TOL = 1e-6               # |K v| <= GAUGE_TOL |K| |v|: a rigid motion the stiffness annihilates
+DENSE_EIGENVECTOR_MAX_DOFS = 2400
+
+
+class Branch:
+    """A followed branch of equilibria.
+
+    Attributes
+    ----------
+    parameter : the parameter's name (a column of the table).
+    points : list of dicts, one per equilibrium on the branch: the parameter, ``s`` (arclength, dimensionless),
+        ``dp_ds``, the user's summaries, ``min_eigenvalue``, ``stable``, ``flutter``, ``residual``,
+        ``newton_iterations``.
+    states : the RodState of each point (empty if ``keep_states=False``).
+    special : list of dicts: the located special points, each with ``kind`` ("fold", "bifurcation" or "hopf"),
+        the parameter, ``index`` (it lies between points index - 1 and index), ``s``, ``min_eigenvalue``,
+        the summaries, ``located_to`` (the width of the final bracket, in the parameter) and ``state``.
+    status : "completed" (reached a bound or the stop condition), "max_steps", "time_budget", "step_too_small"
+        (the corrector failed down to ``ds_min``: a turning point the natural method cannot pass, or no
+        equilibrium nearby), "interrupted"; message : why, in words.
+    wall_time : seconds.
+
+    ``table()`` gives the columns, ``to_csv``/``to_json`` write them, ``plot`` a PNG bifurcation diagram,
+    ``record`` a rerun recording of the path, ``switch`` the branch that bifurcates at a special point.
+    """
+
+    def __init__(self, parameter, settings):
+        self.parameter = parameter
+        self.points, self.states, self.special = [], [], []
+        self.status, self.message, self.wall_time = "", "", 0.0
+        self._settings = settings
+
+    def __repr__(self):
+        sp = ", ".join(f"{s['kind']} at {self.parameter} = {s[self.parameter]:.8g}" for s in self.special)
+        return (f"Branch({len(self.points)} points, {self.parameter} from "
+                f"{self.points[0][self.parameter]:.6g} to {self.points[-1][self.parameter]:.6g}, {self.status}"
+                f"{'; ' + sp if sp else ''})") if self.points else f"Branch(empty, {self.status})"
+
+    @property
+    def columns(self):
+        cols = []
+        for p in self.points:
+            for k in p:
+                if k not in cols:
+                    cols.append(k)
+        return cols
+
+    def table(self):
+        """The points as columns: {name: list}."""
+        return {c: [p.get(c) for p in self.points] for c in self.columns}
+
+    def to_dict(self):
+        """Everything but the states, JSON-ready."""
+        return {"parameter": self.parameter, "status": self.status, "message": self.message,
+                "wall_time": self.wall_time, "points": [_jsonable(p) for p in self.points],
+                "special": [_jsonable({k: v for k, v in s.items() if k not in ("state", "tangent")})
+                            for s in self.special]}
+
+    def to_json(self, path=None):
+        """The branch as JSON text (written to ``path`` if given)."""
+        text = json.dumps(self.to_dict(), allow_nan=False)
+        if path is not None:
+            with open(path, "w") as f:
+                f.write(text + "\n")
+        return text
+
+    def to_csv(self, path=None):
+        """The table of points as CSV text (written to ``path`` if given); special points are not rows."""
+        buf = io.StringIO()
+        writer = csv.writer(buf, lineterminator="\n")
+        cols = self.columns
+        writer.writerow(cols)
+        for p in self.points:
+            writer.writerow(["" if p.get(c) is None else p.get(c) for c in cols])
+        if path is not None:
+            with open(path, "w") as f:
+                f.write(buf.getvalue())
+        return buf.getvalue()
+
+    def to_dataframe(self):
+        """The table as a pandas DataFrame (pandas must be installed)."""
+        import pandas as pd
+
+        return pd.DataFrame(self.table())
+
+    def plot(self, path, y, others=(), **kwargs):
+        """A PNG bifurcation diagram of summary ``y`` against the parameter (``der.plotting.bifurcation_diagram``;
+        needs matplotlib, the ``plot`` extra). ``others``: further branches drawn on the same axes."""
+        from .plotting import bifurcation_diagram
+
+        return bifurcation_diagram([self, *others], path, y, **kwargs)
+
+    def record(self, path):
+        """A rerun recording (.rrd) of the path: one time step per point (needs the states)."""
+        if not self.states:
+            raise ValueError("Branch.record: the branch kept no states (continuation(..., keep_states=True))")
+        from .recording import Recorder
+        from .solvers import SolverOptions
+        from .solvers.system import build_system, energy_terms
+
+        scene_of = self._settings["scene_of"]
+        with Recorder(path, self.states[0] and scene_of(self.points[0][self.parameter]).rod) as rec:
+            rec.log_rest()
+            for i, (point, state) in enumerate(zip(self.points, self.states)):
+                scene = scene_of(point[self.parameter])
+                system = build_system(scene, SolverOptions())
+                rec.log_step(i, state, point["residual"] or 0.0, energy_terms(system, state))
+                rec.rec.log(f"continuation/{self.parameter}", rec.rr.Scalars(float(point[self.parameter])))
+        return path
+
+    def switch(self, which=0, side=1, ds=None, **overrides):
+        """Follow the branch that bifurcates at special point ``which`` (an index into ``special``, or the dict),
+        starting along the critical eigenvector (``side`` +1 or -1 picks its sign). The eigenvector is computed
+        here with a dense eigen-solver on the constrained stiffness (small rods: at most
+        DENSE_EIGENVECTOR_MAX_DOFS free DOFs). Other arguments as for ``continuation`` (default: this branch's).
+        Returns a new Branch whose first point is the bifurcation point."""
+        sp = self.special[which] if isinstance(which, int) else which
+        if sp.get("kind") not in ("bifurcation",):
+            raise ValueError(f"Branch.switch: special point {which!r} is a {sp.get('kind')!r}; branch switching "
+                             "needs a 'bifurcation'")
+        if side not in (1, -1):
+            raise ValueError(f"Branch.switch: side must be +1 or -1; got {side!r}")
+        settings = dict(self._settings)
+        settings.update(overrides)
+        settings["ds"] = settings["ds"] if ds is None else ds
+        problem = _Problem(settings)
+        p = sp[self.parameter]
+        state = problem.prepared(p, sp["state"])
+        phi = critical_eigenvector(problem.scene(p), state)
+        tq = sp["tangent"][:-1]
+        w = problem.weights
+        # orthogonal (in <.,.>) to the old branch's tangent: the hyperplane then misses the old branch near x*
+        nt = float(np.sum(w * tq * tq))
+        if nt > 0:
+            phi = phi - float(np.sum(w * phi * tq)) / nt * tq
+        t = np.append(phi, 0.0)
+        t *= side / problem.norm(t)
+        return _follow(problem, state, p, t, settings, first=dict(sp), parameter=self.parameter)
+
+
+def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=None, direction=None, ds=0.05,
+                 ds_min=1e-6, ds_max=0.25, p_scale=None, max_steps=200, time_budget=math.inf, method="arclength",
+                 summaries=None, stop=None, stability=True, locate=True, locate_tol=1e-7, n_eigenvalues=6,
+                 tol=1e-8, max_newton=12, keep_states=True, progress=None, options=None):
+    """Follow an equilibrium of ``scene_of(p)`` as p changes, from ``p0``.
+
+    Parameters
+    ----------
+    scene_of : callable float -> der.Scene; every scene's rod has the same number of edges (the parameter may
+        set loads, constraint targets, natural strains, stiffnesses).
+    p0 : the start; the first point is ``der.solve(scene_of(p0), state=state)``.
+    p_end : optional end of the parameter range (the branch stops on it, or when p leaves ``bounds``).
+    state : starting state for the first solve (default: the rod's rest state).
+    parameter : the parameter's name in the table (e.g. "mt").
+    bounds : (low, high): the branch ends where p would leave them (default: p0 and p_end, or unbounded).
+    direction : +1 or -1, the initial sign of dp/ds (default: towards p_end, else +1).
+    ds, ds_min, ds_max : arclength step (dimensionless, see the module docstring), adapted: halved on a failed
+        corrector, x1.5 after a corrector of at most 3 Newton iterations.
+    p_scale : the parameter's unit in the arclength (default |p_end - p0|, else max(|p0|, 1)).
+    max_steps, time_budget : bounds on the number of points and the seconds.
+    method : "arclength" (default; passes folds) or "natural" (p steps, each a der.solve; stops at a fold).
+    summaries : {name: f(scene, state) -> float}: scalar columns of the table.
+    stop : optional f(point dict) -> bool; True ends the branch after that point.
+    stability, locate, locate_tol : the lowest eigenvalues at every point; special points located by secant
+        to ``locate_tol`` relative width in p (folds: |dp/ds| below it).
+    n_eigenvalues, tol, max_newton : eigenvalues per point, residual tolerance (as ``der.solve``), Newton
+        iterations per corrector.
+    keep_states : keep every point's RodState (needed for ``record`` and ``switch``).
+    progress : True: a line per point on stderr; None: after 2 s.
+    options : der.SolverOptions for the first solve and the natural method.
+
+    Returns
+    -------
+    Branch
+
+    Raises
+    ------
+    TypeError / ValueError before any work for bad arguments; der.ConvergenceError if the first point does not
+    converge.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.ring(1.0, 24), A1=1.0, A2=1.5)
+    >>> branch = der.continuation(lambda mt: der.Scene(rod, loads=[der.twisting_moment(mt)]), 0.0, 0.5,
+    ...                           parameter="mt")                                   # doctest: +SKIP
+    """
+    from . import validate
+    from .solvers import SolverOptions
+
+    if not callable(scene_of):
+        raise TypeError(f"der.continuation: scene_of must be a function of the parameter returning a der.Scene; "
+                        f"got {type(scene_of).__name__}")
+    p0 = validate.finite_number(p0, "der.continuation: p0")
+    if p_end is not None:
+        p_end = validate.finite_number(p_end, "der.continuation: p_end")
+        if p_end == p0:
+            raise ValueError(f"der.continuation: p_end must differ from p0 = {p0}")
+    if method not in METHODS:
+        raise ValueError(f"der.continuation: method must be one of {METHODS}; got {method!r}")
+    for name, value in (("ds", ds), ("ds_min", ds_min), ("ds_max", ds_max), ("locate_tol", locate_tol),
+                        ("tol", tol)):
+        validate.positive_number(value, f"der.continuation: {name}")
+    if not ds_min <= ds <= ds_max:
+        raise ValueError(f"der.continuation: need ds_min <= ds <= ds_max; got {ds_min}, {ds}, {ds_max}")
+    max_steps = validate.integer(max_steps, "der.continuation: max_steps", "an integer >= 1")
+    max_newton = validate.integer(max_newton, "der.continuation: max_newton", "an integer >= 1")
+    if max_steps < 1 or max_newton < 1:
+        raise ValueError(f"der.continuation: max_steps and max_newton must be >= 1; got {max_steps}, {max_newton}")
+    if not (isinstance(time_budget, (int, float)) and time_budget > 0):
+        raise ValueError(f"der.continuation: time_budget must be a number of seconds > 0; got {time_budget!r}")
+    if direction is None:
+        direction = 1 if p_end is None or p_end > p0 else -1
+    if direction not in (1, -1):
+        raise ValueError(f"der.continuation: direction must be +1 or -1; got {direction!r}")
+    if bounds is None:
+        bounds = (-math.inf, math.inf) if p_end is None else (min(p0, p_end), max(p0, p_end))
+    lo, hi = (float(b) for b in bounds)
+    if not lo <= p0 <= hi or not lo < hi:
+        raise ValueError(f"der.continuation: bounds {bounds} must contain p0 = {p0} (low < high)")
+    if p_scale is None:
+        p_scale = abs(p_end - p0) if p_end is not None else max(abs(p0), 1.0)
+    p_scale = validate.positive_number(p_scale, "der.continuation: p_scale")
+    summaries = dict(summaries or {})
+    for name, f in summaries.items():
+        if not callable(f) or name in ("s", parameter):
+            raise ValueError(f"der.continuation: summaries[{name!r}] must be a function (scene, state) -> float "
+                             f"with a name other than 's' and {parameter!r}")
+    if stop is not None and not callable(stop):
+        raise TypeError(f"der.continuation: stop must be a function of a point (dict) or None; got {stop!r}")
+    options = options or SolverOptions()
+    if not isinstance(options, SolverOptions):
+        raise TypeError(f"der.continuation: options must be a der.SolverOptions; got {type(options).__name__}")
+    settings = dict(scene_of=scene_of, parameter=parameter, bounds=(lo, hi), ds=float(ds), ds_min=float(ds_min),
+                    ds_max=float(ds_max), p_scale=p_scale, max_steps=max_steps, time_budget=float(time_budget),
+                    method=method, summaries=summaries, stop=stop, stability=bool(stability), locate=bool(locate),
+                    locate_tol=float(locate_tol), n_eigenvalues=n_eigenvalues, tol=float(tol),
+                    max_newton=max_newton, keep_states=bool(keep_states), progress=progress, options=options)
+    problem = _Problem(settings)
+    scene = problem.scene(p0)
+    if state is not None:
+        from .rod import check_state
+
+        check_state(scene.rod, state, "der.continuation: state")
+    from .solvers import solve
+
+    first = solve(scene, state=state, options=options, tol=tol, stability=False)
+    t0 = np.zeros(problem.n + 1)
+    t0[-1] = direction
+    return _follow(problem, problem.prepared(p0, first.state), p0, t0, settings, parameter=parameter,
+                   first_residual=first.residual, first_iterations=first.iterations)
+
+
+class _Problem:
+    """The scenes along the parameter, their systems, residuals and the bordered Newton solves."""
+
+    def __init__(self, settings):
+        from .solvers import SolverOptions
+
+        self.scene_of = settings["scene_of"]
+        self.options = settings.get("options") or SolverOptions()
+        self.tol = settings["tol"]
+        self.p_scale = settings["p_scale"]
+        self._systems = {}
+        self.n = None
+        self.weights = None
+
+    def scene(self, p):
+        scene = self.scene_of(float(p))
+        if not isinstance(scene, Scene):
+            raise TypeError(f"der.continuation: scene_of({p!r}) must return a der.Scene; got {type(scene).__name__}")
+        if self.n is None:
+            rod = scene.rod
+            self.n = rod.n_dof
+            w = np.where(np.arange(rod.n_dof) % 4 == 3, 1.0, 1.0 / rod.length ** 2)
+            if not rod.closed:
+                w[4 * rod.n_nodes - 1] = 0.0      # the unused angle slot of the last node
+            self.weights = w / np.count_nonzero(w)
+            self.w_p = 1.0 / self.p_scale ** 2
+        elif scene.rod.n_dof != self.n:
+            raise ValueError(f"der.continuation: scene_of({p!r}) has a rod with {scene.rod.n_dof // 4} nodes; the "
+                             f"first had {self.n // 4} (the parameter may not change the discretisation)")
+        return scene
+
+    def system(self, p):
+        from .solvers.system import build_system
+
+        p = float(p)
+        sys_ = self._systems.get(p)
+        if sys_ is None:
+            if len(self._systems) > 8:
+                self._systems.pop(next(iter(self._systems)))
+            sys_ = build_system(self.scene(p), self.options)
+            self._systems[p] = sys_
+        return sys_
+
+    def prepared(self, p, state):
+        """A copy of ``state`` with scene_of(p)'s constraint targets applied (frames transported)."""
+        from .solvers.system import prepare_state
+
+        return prepare_state(self.system(p), state)
+
+    def inner(self, u, v):
+        return float(np.sum(self.weights * u[:-1] * v[:-1]) + self.w_p * u[-1] * v[-1])
+
+    def norm(self, u):
+        return math.sqrt(self.inner(u, u))
+
+    def residual(self, p, state):
+        """(R, residual norm, strain ok) at ``state`` for scene_of(p) (evaluates the system)."""
+        from .solvers.system import (
+            evaluate_system, load_scales, max_strain, residual_norm, residual_vector,
+        )
+
+        sys_ = self.system(p)
+        evaluate_system(sys_, state, 1)
+        R = residual_vector(sys_)
+        res = residual_norm(sys_, R, load_scales(sys_, state))
+        strain_ok = (max_strain(sys_, state) <= self.options.effective_strain_tol) if sys_.rod.inextensible else True
+        return R, res, strain_ok
+
+    def dR_dp(self, p, state):
+        """(dR/dp at fixed free DOFs, dq_fixed/dp): central differences; the constraint targets move with p."""
+        from .solvers.system import evaluate_system, prepare_state, residual_vector
+
+        h = 1e-6 * max(abs(p), self.p_scale)
+        out = []
+        for pp in (p + h, p - h):
+            sys_ = self.system(pp)
+            st = prepare_state(sys_, state)
+            st.lam[:] = state.lam
+            evaluate_system(sys_, st, 1)
+            out.append((residual_vector(sys_), st.q.copy()))
+        return (out[0][0] - out[1][0]) / (2 * h), (out[0][1] - out[1][1]) / (2 * h)
+
+    def factor(self, p, state):
+        """Factorise the constrained force Jacobian at ``state``; returns (lu, piv, system, gauge basis)."""
+        from scipy.linalg.lapack import dgbtrf
+
+        from .linalg import add_diagonal, constrain_band
+        from .solvers.system import evaluate_system
+
+        sys_ = self.system(p)
+        evaluate_system(sys_, state, 2)
+        V = gauge_modes(sys_, state)
+        ab = sys_.ab.copy(order="F")
+        if V.shape[1]:
+            diag = np.abs(ab[sys_.kl + sys_.ku, :][sys_.perm])
+            diag[diag == 0] = 1.0
+            add_diagonal(ab, sys_.kl, sys_.ku, sys_.perm, diag, GAUGE_REGULARISATION)
+        constrain_band(ab, sys_.kl, sys_.ku, sys_.perm, sys_.fixed, 1.0)
+        lu, piv, info = dgbtrf(ab, sys_.kl, sys_.ku, overwrite_ab=1)
+        return (lu, piv, sys_, V) if info == 0 else None
+
+    def solve(self, fac, rhs):
+        """K^-1 rhs (rhs (n,) or (n, k)), rigid motions projected out."""
+        from scipy.linalg.lapack import dgbtrs
+
+        lu, piv, sys_, V = fac
+        b = np.empty_like(rhs)
+        b[sys_.perm] = rhs
+        x, info = dgbtrs(lu, sys_.kl, sys_.ku, b.reshape(len(b), -1), piv)
+        x = x.reshape(b.shape)[sys_.perm]
+        if V.shape[1]:
+            x = x - V @ (V.T @ x)
+        return x
+
+    def tangent(self, p, state, t_prev):
+        """The unit tangent at a converged point, oriented along ``t_prev``; None if K is singular."""
+        fac = self.factor(p, state)
+        if fac is None:
+            return None
+        Rp, dqf = self.dR_dp(p, state)
+        b = self.solve(fac, Rp)
+        fixed = fac[2].fixed
+        b[fixed] = dqf[fixed]
+        # (K b = R_p: t = (b, 1) tp with <t_prev, t> = 1 fixing length and orientation)
+        t = np.append(b, 1.0)
+        tp = 1.0 / self.inner(t_prev, t) if self.inner(t_prev, t) != 0 else 1.0
+        t *= tp
+        return t / self.norm(t)
+
+    def correct(self, state, p, t, x_pred, max_newton, fixed_p=False):
+        """Bordered Newton from ``state`` at ``p`` onto {R = 0, <t, x - x_pred> = 0} (or R = 0 at fixed p).
+
+        Returns (state, p, residual, iterations) or None on failure."""
+        from .solvers.system import multiplier_update, transport
+
+        trial = state.copy()
+        res_prev = math.inf
+        updates = 0
+        for it in range(max_newton + 1):
+            R, res, strain_ok = self.residual(p, state)
+            if not np.isfinite(res):
+                return None
+            if res <= self.tol:
+                if strain_ok:
+                    return state, p, res, it
+                if updates >= 30:
+                    return None
+                multiplier_update(self.system(p), state)
+                updates += 1
+                continue
+            if it == max_newton or (it >= 3 and res > 0.5 * res_prev) or res > 1e3 * max(res_prev, 1e-3):
+                return None
+            res_prev = res
+            fac = self.factor(p, state)
+            if fac is None:
+                return None
+            sys_ = fac[2]
+            if fixed_p:
+                dq, dp = self.solve(fac, R), 0.0
+            else:
+                Rp, dqf = self.dR_dp(p, state)
+                ab = self.solve(fac, np.stack([R, Rp], axis=1))
+                a, b = ab[:, 0], ab[:, 1]
+                a[sys_.fixed] = 0.0
+                b[sys_.fixed] = dqf[sys_.fixed]
+                x = np.append(state.q, p)
+                N = self.inner(t, x - x_pred)
+                denom = float(np.sum(self.weights * t[:-1] * b)) + self.w_p * t[-1]
+                if denom == 0 or not np.isfinite(denom):
+                    return None
+                dp = -(N + float(np.sum(self.weights * t[:-1] * a))) / denom
+                dq = a + dp * b
+            if not np.all(np.isfinite(dq)):
+                return None
+            p_new = p + dp
+            if not transport(sys_, state, state.q + dq, trial):
+                return None
+            state = self.prepared(p_new, trial)
+            state.lam[:] = trial.lam
+            p = p_new
+        return None
+
+
+def gauge_modes(system, state):
+    """Orthonormal basis (n_dof, m) of the rigid motions (translations, rotations about the centroid, and the
+    uniform turn of all cross-sections of a rod with no natural curvature) that the constraints leave free and
+    the stiffness ``system.ab`` (evaluated at ``state``) annihilates; (n_dof, 0) if none."""
+    from .linalg import band_matvec
+
+    rod = system.rod
+    fixed = system.fixed.copy()
+    if not rod.closed:
+        fixed[4 * rod.n_nodes - 1] = False
+    x = state.positions
+    centre = x.mean(axis=0)
+    cands = []
+    for a in range(3):
+        v = np.zeros(rod.n_dof)
+        v.reshape(-1, 4)[:, a] = 1.0
+        cands.append(v)
+        w = np.zeros(3)
+        w[a] = 1.0
+        v = np.zeros(rod.n_dof)
+        v.reshape(-1, 4)[:, :3] = np.cross(w, x - centre)
+        v[4 * np.arange(rod.n_edges) + 3] = state.tangents @ w
+        cands.append(v)
+    if np.abs(rod.kappa_bar).max() == 0.0:
+        v = np.zeros(rod.n_dof)
+        v[4 * np.arange(rod.n_edges) + 3] = 1.0
+        cands.append(v)
+    keep = []
+    Kv, Kabs = np.empty(rod.n_dof), np.empty(rod.n_dof)
+    for v in cands:
+        if not rod.closed:
+            v[4 * rod.n_nodes - 1] = 0.0
+        if np.abs(v[fixed]).max(initial=0.0) > 1e-12 * np.abs(v).max():
+            continue
+        band_matvec(system.ab, system.kl, system.ku, system.perm, v, Kv, False)
+        band_matvec(system.ab, system.kl, system.ku, system.perm, v, Kabs, True)
+        Kv[fixed] = 0.0
+        if np.abs(Kv).max() <= GAUGE_TOL * max(np.abs(Kabs).max(), 1e-300):
+            keep.append(v)
+    if not keep:
+        return np.zeros((rod.n_dof, 0))
+    Q, Rr = np.linalg.qr(np.array(keep).T)
+    good = np.abs(np.diag(Rr)) > 1e-10 * np.abs(np.diag(Rr)).max()
+    return Q[:, good]
+
+
+def critical_eigenvector(scene, state):
+    """The eigenvector of the constrained stiffness K (free DOFs, rigid motions removed) whose eigenvalue is
+    nearest zero, as a full DOF vector (real part, unit max-norm). Dense: for small rods only (at most
+    DENSE_EIGENVECTOR_MAX_DOFS free DOFs). Computed here, not by der.solvers.stability, which gives eigenvalues
+    only."""
+    import scipy.linalg as la
+
+    from .linalg import band_to_sparse
+    from .solvers import SolverOptions
+    from .solvers.system import build_system, evaluate_system, prepare_state
+
+    system = build_system(scene, SolverOptions())
+    st = prepare_state(system, state)
+    evaluate_system(system, st, 2)
+    V = gauge_modes(system, st)
+    free = system.free.copy()
+    if not system.rod.closed:
+        free[4 * system.rod.n_nodes - 1] = False
+    idx = np.flatnonzero(free)
+    if idx.size > DENSE_EIGENVECTOR_MAX_DOFS:
+        raise ValueError(f"critical_eigenvector: {idx.size} free DOFs is more than the dense limit "
+                         f"{DENSE_EIGENVECTOR_MAX_DOFS}; use a smaller rod for branch switching")
+    K = band_to_sparse(system.ab, system.kl, system.ku, system.perm).toarray()[np.ix_(idx, idx)]
+    Z = la.null_space(V[idx].T) if V.shape[1] else np.eye(idx.size)
+    ev, vec = la.eig(Z.T @ K @ Z)
+    k = int(np.argmin(np.abs(ev)))
+    y = Z @ vec[:, k]
+    y = y.real if np.abs(y.real).max() >= np.abs(y.imag).max() else y.imag
+    out = np.zeros(system.rod.n_dof)
+    out[idx] = y / np.abs(y).max()
+    return out
+
+
+def _point(problem, settings, state, p, s, dp_ds, residual, iterations):
+    """The table row of a converged point (and its stability)."""
+    from .solvers import check_stability
+
+    parameter = settings["parameter"]
+    scene = problem.scene(p)
+    row = {parameter: float(p), "s": float(s), "dp_ds": float(dp_ds)}
+    for name, f in settings["summaries"].items():
+        row[name] = float(f(scene, state))
+    row["residual"] = float(residual)
+    row["newton_iterations"] = int(iterations)
+    if settings["stability"]:
+        st = check_stability(scene, state, settings["n_eigenvalues"])
+        row["min_eigenvalue"] = float(st.min_eigenvalue)
+        row["stable"] = bool(st.stable)
+        row["flutter"] = bool(st.flutter)
+        ev = np.asarray(st.eigenvalues)
+        row["_crossing_complex"] = bool(ev.size and abs(ev[0].imag) > 1e-8 * max(abs(ev[0]), 1e-300)) \
+            if np.iscomplexobj(ev) else False
+    return row
+
+
+def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_residual=0.0, first_iterations=0):
+    """The continuation loop from a converged (state, p) with the previous tangent ``t_prev``."""
+    t_start = time.perf_counter()
+    branch = Branch(parameter, settings)
+    lo, hi = settings["bounds"]
+    ds = settings["ds"]
+    natural = settings["method"] == "natural"
+    progress = settings["progress"]
+
+    def say(msg):
+        if progress or (progress is None and time.perf_counter() - t_start > 2.0):
+            print(f"[der] continuation: {msg} ({time.perf_counter() - t_start:.1f} s)", file=sys.stderr, flush=True)
+
+    def add(state, p, s, t, residual, iterations):
+        row = _point(problem, settings, state, p, s, t[-1], residual, iterations)
+        branch.points.append(row)
+        branch.states.append(state.copy())
+        tangents.append(t)
+        return row
+
+    tangents = []
+    if natural:
+        t = t_prev.copy()
+    else:
+        t = problem.tangent(p, state, t_prev)
+        if t is None:
+            t = t_prev.copy()       # a start exactly at a singular point (a bifurcation): go along t_prev
+    row = add(state, p, 0.0, t, first_residual if first is None else 0.0, first_iterations)
+    s_total = 0.0
+    status, message = "max_steps", f"{settings['max_steps']} steps done"
+    try:
+        while len(branch.points) <= settings["max_steps"]:
+            if time.perf_counter() - t_start > settings["time_budget"]:
+                status, message = "time_budget", f"time budget of {settings['time_budget']:g} s used up"
+                break
+            if settings["stop"] is not None and len(branch.points) > 1 and settings["stop"](row):
+                status, message = "completed", "the stop condition holds"
+                break
+            if len(branch.points) > 1 and not (lo < p < hi):
+                status, message = "completed", f"{parameter} reached the bound {p:.8g}"
+                break
+            # predictor; a step that would leave the bounds lands on the bound at fixed p
+            x = np.append(state.q, p)
+            x_pred = x + ds * t
+            landing = not (lo <= x_pred[-1] <= hi)
+            if landing and t[-1] != 0:
+                bound = hi if x_pred[-1] > hi else lo
+                x_pred = x + (bound - p) / t[-1] * t
+            out = _step(problem, settings, state, p, t, x_pred, natural, landing, branch)
+            if out is None:
+                ds *= 0.5
+                if ds < settings["ds_min"]:
+                    status, message = "step_too_small", (
+                        f"no equilibrium found from {parameter} = {p:.8g} with the smallest step ds_min = "
+                        f"{settings['ds_min']:g}" + (" (natural continuation stops at a fold)" if natural else ""))
+                    break
+                continue
+            new_state, new_p, residual, iterations = out
+            t_new = _tangent_of(problem, new_state, new_p, state, p, t, natural)
+            if t_new is None or (problem.inner(t, t_new) < 0.5 and ds > 2 * settings["ds_min"] and not landing):
+                ds *= 0.5     # the tangent turned by more than 60 degrees: the step may have jumped branches
+                if ds < settings["ds_min"]:
+                    status, message = "step_too_small", f"the tangent is not continuous at {parameter} = {p:.8g}"
+                    break
+                continue
+            s_total += problem.norm(np.append(new_state.q, new_p) - x)
+            prev_row, prev_state, prev_p, prev_t = row, state, p, t
+            row = add(new_state, new_p, s_total, t_new, residual, iterations)
+            state, p, t = new_state, new_p, t_new
+            say(f"point {len(branch.points) - 1}: {parameter} = {p:.8g}, dp/ds = {t[-1]:+.3g}, ds = {ds:.3g}"
+                + (f", min eigenvalue {row['min_eigenvalue']:.3g}" if settings["stability"] else ""))
+            if settings["locate"] and not natural:
+                _detect(problem, settings, branch, prev_row, row, prev_state, prev_p, prev_t, ds)
+            if landing:
+                status, message = "completed", f"{parameter} reached the bound {p:.8g}"
+                break
+            if iterations <= 3:
+                ds = min(settings["ds_max"], ds * 1.5)
+    except KeyboardInterrupt:
+        status, message = "interrupted", "interrupted by the user; the points so far are kept"
+    for r in branch.points:
+        r.pop("_crossing_complex", None)
+    if not settings["keep_states"]:
+        branch.states = []
+    branch.status, branch.message = status, message
+    branch.wall_time = time.perf_counter() - t_start
+    return branch
+
+
+def _step(problem, settings, state, p, t, x_pred, natural, landing, branch):
+    """One corrector from the prediction ``x_pred``; (state, p, residual, iterations) or None."""
+    from .solvers import solve
+    from .solvers.system import transport
+
+    p_new = float(x_pred[-1])
+    if natural:
+        pred = state.copy()
+        if not transport(problem.system(p), state, x_pred[:-1], pred):
+            return None
+        result = solve(problem.scene(p_new), state=pred, options=settings["options"], tol=settings["tol"],
+                       stability=False, raise_on_failure=False)
+        if not result.converged:
+            return None
+        return problem.prepared(p_new, result.state), p_new, result.residual, result.iterations
+    pred = state.copy()
+    if not transport(problem.system(p), state, x_pred[:-1], pred):
+        return None
+    pred = problem.prepared(p_new, pred)
+    pred.lam[:] = state.lam
+    return problem.correct(pred, p_new, t, x_pred, settings["max_newton"], fixed_p=landing)
+
+
+def _tangent_of(problem, new_state, new_p, state, p, t, natural):
+    if not natural:
+        return problem.tangent(new_p, new_state, t)
+    # natural parameter: the secant
+    d = np.append(new_state.q - state.q, new_p - p)
+    n = problem.norm(d)
+    return d / n if n > 0 else None
+
+
+def _detect(problem, settings, branch, a, b, state_a, p_a, t_a, ds):
+    """Locate a fold (dp/ds changes sign) or a change of stability between consecutive points a and b."""
+    parameter = settings["parameter"]
+    fold = a["dp_ds"] * b["dp_ds"] < 0
+    stab = settings["stability"] and a["stable"] != b["stable"]
+    if not (fold or stab):
+        return
+    kind = "fold" if fold else ("hopf" if (b["_crossing_complex"] or a["_crossing_complex"]) else "bifurcation")
+    key = "dp_ds" if fold else "min_eigenvalue"
+    x_a = np.append(state_a.q, p_a)
+    s_b = problem.norm(np.append(branch.states[-1].q, b[parameter]) - x_a)   # chord length of the step
+    # Illinois (regula falsi) on the step length sigma in (0, s_b), from point a along its tangent
+    s0, g0, q0 = 0.0, a[key], a[parameter]
+    s1, g1, q1 = s_b, b[key], b[parameter]
+    best = None
+    width = abs(q1 - q0)
+    scale = max(abs(b[parameter]), problem.p_scale)
+    for _ in range(40):
+        sigma = (s0 * g1 - s1 * g0) / (g1 - g0) if g1 != g0 else 0.5 * (s0 + s1)
+        if not (min(s0, s1) < sigma < max(s0, s1)):
+            sigma = 0.5 * (s0 + s1)
+        out = problem.correct(_predicted(problem, state_a, p_a, t_a, sigma), p_a + sigma * t_a[-1], t_a,
+                              x_a + sigma * t_a, settings["max_newton"])
+        if out is None:
+            break
+        st, pp, res, its = out
+        tt = problem.tangent(pp, st, t_a)
+        if tt is None:
+            break
+        row = _point(problem, settings, st, pp, a["s"] + sigma, tt[-1], res, its)
+        g = row[key]
+        if best is None or abs(g) < abs(best[0][key]):
+            best = (row, st, tt)
+        if g * g1 < 0:
+            s0, g0, q0 = s1, g1, q1
+        else:
+            g0 *= 0.5
+        s1, g1, q1 = sigma, g, pp
+        width = abs(q1 - q0)
+        if g == 0 or (fold and abs(g) <= settings["locate_tol"]) or \
+                (not fold and width <= settings["locate_tol"] * scale):
+            break
+    if best is None:
+        row, st, tt = b, branch.states[-1], None
+        note = "not refined (the corrector failed); the point after the change is reported"
+    else:
+        row, st, tt = best
+        note = ""
+    sp = {"kind": kind, parameter: row[parameter], "index": len(branch.points) - 1, "s": row["s"]}
+    for k, v in row.items():
+        if k not in sp and not k.startswith("_") and k not in ("newton_iterations",):
+            sp[k] = v
+    sp["located_to"] = width if fold is False else abs(row["dp_ds"])
+    sp["located_by"] = ("secant on dp/ds (located_to: |dp/ds| there)" if fold else
+                        "secant on the lowest eigenvalue (located_to: bracket width in the parameter)")
+    if note:
+        sp["note"] = note
+    sp["state"] = st.copy()
+    sp["tangent"] = tt if tt is not None else np.append(np.zeros(problem.n), 1.0)
+    branch.special.append(sp)
+
+
+def _predicted(problem, state, p, t, sigma):
+    from .solvers.system import transport
+
+    pred = state.copy()
+    transport(problem.system(p), state, state.q + sigma * t[:-1], pred)
+    pred = problem.prepared(p + sigma * t[-1], pred)
+    pred.lam[:] = state.lam
+    return pred
+
+
+def _jsonable(value):
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        return v if math.isfinite(v) else None
+    return value
+
+
+__all__ = ["continuation", "Branch", "critical_eigenvector", "gauge_modes", "METHODS", "KINDS"]

@@ -179,7 +179,7 @@ class Branch:
             phi = phi - float(np.sum(w * phi * tq)) / nt * tq
         t = np.append(phi, 0.0)
         t *= side / problem.norm(t)
-        return _follow(problem, state, p, t, settings, first=dict(sp), parameter=self.parameter)
+        return _follow(problem, state, p, t, settings, first=dict(sp), parameter=self.parameter, along=True)
 
 
 def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=None, direction=None, ds=0.05,
@@ -579,8 +579,10 @@ def _point(problem, settings, state, p, s, dp_ds, residual, iterations):
     return row
 
 
-def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_residual=0.0, first_iterations=0):
-    """The continuation loop from a converged (state, p) with the previous tangent ``t_prev``."""
+def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_residual=0.0, first_iterations=0,
+            along=False):
+    """The continuation loop from a converged (state, p) with the previous tangent ``t_prev`` (``along``: the
+    first step goes along t_prev itself, as from a bifurcation point onto the other branch)."""
     t_start = time.perf_counter()
     branch = Branch(parameter, settings)
     lo, hi = settings["bounds"]
@@ -600,7 +602,7 @@ def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_re
         return row
 
     tangents = []
-    if natural:
+    if natural or along:
         t = t_prev.copy()
     else:
         t = problem.tangent(p, state, t_prev)

@@ -44,6 +44,7 @@ KINDS = ("fold", "bifurcation", "hopf")
 GAUGE_REGULARISATION = 1e-12   # times diag|K|, only when the rod has free rigid motions (they are projected out)
 GAUGE_TOL = 1e-6               # |K v| <= GAUGE_TOL |K| |v|: a rigid motion the stiffness annihilates
 DENSE_EIGENVECTOR_MAX_DOFS = 2400
+TANGENT_COS = 0.9              # a step whose tangent turns by more than acos(0.9) = 26 degrees is halved
 
 
 class Branch:
@@ -165,6 +166,7 @@ class Branch:
         if side not in (1, -1):
             raise ValueError(f"Branch.switch: side must be +1 or -1; got {side!r}")
         settings = dict(self._settings)
+        settings["stop"] = None          # the old branch's stop condition is about the old branch
         settings.update(overrides)
         settings["ds"] = settings["ds"] if ds is None else ds
         problem = _Problem(settings)
@@ -574,6 +576,8 @@ def _point(problem, settings, state, p, s, dp_ds, residual, iterations):
         row["stable"] = bool(st.stable)
         row["flutter"] = bool(st.flutter)
         ev = np.asarray(st.eigenvalues)
+        # how many of the lowest eigenvalues are negative: a step with a fold in it must change this by one
+        row["_n_unstable"] = int(np.sum(ev.real < -1e-9 * max(1.0, float(np.abs(ev).max(initial=0.0)))))
         row["_crossing_complex"] = bool(ev.size and abs(ev[0].imag) > 1e-8 * max(abs(ev[0]), 1e-300)) \
             if np.iscomplexobj(ev) else False
     return row
@@ -640,8 +644,12 @@ def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_re
                 continue
             new_state, new_p, residual, iterations = out
             t_new = _tangent_of(problem, new_state, new_p, state, p, t, natural)
-            if t_new is None or (problem.inner(t, t_new) < 0.5 and ds > 2 * settings["ds_min"] and not landing):
-                ds *= 0.5     # the tangent turned by more than 60 degrees: the step may have jumped branches
+            if t_new is None or (not landing and ds > 2 * settings["ds_min"] and (
+                    problem.inner(t, t_new) < TANGENT_COS or _crowded(settings, row, new_state, t, t_new,
+                                                                      problem, new_p))):
+                # the tangent turned by more than ~25 degrees (the step may have jumped branches), or a fold and
+                # another change of stability fell into one step: halve it
+                ds *= 0.5
                 if ds < settings["ds_min"]:
                     status, message = "step_too_small", f"the tangent is not continuous at {parameter} = {p:.8g}"
                     break
@@ -652,7 +660,8 @@ def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_re
             state, p, t = new_state, new_p, t_new
             say(f"point {len(branch.points) - 1}: {parameter} = {p:.8g}, dp/ds = {t[-1]:+.3g}, ds = {ds:.3g}"
                 + (f", min eigenvalue {row['min_eigenvalue']:.3g}" if settings["stability"] else ""))
-            if settings["locate"] and not natural:
+            if settings["locate"] and not natural and not (along and len(branch.points) == 2):
+                # (a switched branch starts at the special point itself: its first step is not a crossing)
                 _detect(problem, settings, branch, prev_row, row, prev_state, prev_p, prev_t, ds)
             if landing:
                 status, message = "completed", f"{parameter} reached the bound {p:.8g}"
@@ -663,11 +672,21 @@ def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_re
         status, message = "interrupted", "interrupted by the user; the points so far are kept"
     for r in branch.points:
         r.pop("_crossing_complex", None)
+        r.pop("_n_unstable", None)
     if not settings["keep_states"]:
         branch.states = []
     branch.status, branch.message = status, message
     branch.wall_time = time.perf_counter() - t_start
     return branch
+
+
+def _crowded(settings, row, new_state, t, t_new, problem, new_p):
+    """True if the step to (new_state, new_p) holds a fold (dp/ds changes sign) and the number of negative
+    eigenvalues changed by other than one: a bifurcation near the fold, to be separated by a smaller step."""
+    if not settings["stability"] or t[-1] * t_new[-1] >= 0:
+        return False
+    new_row = _point(problem, settings, new_state, new_p, 0.0, t_new[-1], 0.0, 0)
+    return abs(new_row["_n_unstable"] - row["_n_unstable"]) != 1
 
 
 def _step(problem, settings, state, p, t, x_pred, natural, landing, branch):

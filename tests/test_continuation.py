@@ -1,0 +1,178 @@
+"""der.continuation and der.sweep: the twisted loop (paper Section 6.1) followed through its fold, its two-wave
+bifurcation located and switched onto, and sweeps on a local Dask cluster equal to the serial run bit for bit.
+
+Small rings (20 and 40 edges); the discretisation error of the fold and of the bifurcation is O(1/n^2), so the
+closed forms are checked through the error ratio between n and 2n and the Richardson extrapolation."""
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import der
+from der import closed_forms as cf
+from der import diagnostics as dg
+
+
+def mean_alpha(scene, state):
+    return float(np.nanmean(dg.alpha(scene.rod, state)))
+
+
+def out_of_plane(scene, state):
+    c = state.positions - state.positions.mean(axis=0)
+    normal = np.linalg.svd(c, full_matrices=False)[2][-1]
+    return float(np.abs(c @ normal).max())
+
+
+SUMMARIES = {"alpha": mean_alpha, "out_of_plane": out_of_plane}
+
+
+def loop(n, A2):
+    rod = der.rod_from_shape(der.shapes.ring(1.0, n), 1.0, A2)
+    return lambda mt: der.Scene(rod, loads=[der.twisting_moment(mt)])
+
+
+def first_special(n, A2, mt0, **kw):
+    branch = der.continuation(loop(n, A2), mt0, parameter="mt", bounds=(0.0, 1.2), ds=0.2, locate_tol=1e-9,
+                              summaries=SUMMARIES, stop=lambda r: not r["stable"] or r["dp_ds"] < 0, **kw)
+    assert branch.special, branch.message
+    return branch, branch.special[0]
+
+
+def test_loop_followed_through_the_fold():
+    """A1/A2 = 0.67: alpha passes pi/2 continuously, m_t turns back at the fold, the branch beyond is unstable."""
+    branch = der.continuation(loop(20, 1.0 / 0.67), 0.3, parameter="mt", bounds=(0.2, 1.2), ds=0.2,
+                              summaries=SUMMARIES, stop=lambda r: r["alpha"] > 2.2, locate_tol=1e-9)
+    assert branch.status == "completed", branch.message
+    alpha = np.array([p["alpha"] for p in branch.points])
+    mt = np.array([p["mt"] for p in branch.points])
+    stable = np.array([p["stable"] for p in branch.points])
+    assert alpha[0] < 0.5 and alpha[-1] > 2.2
+    assert np.all(np.diff(alpha) > 0) and np.max(np.diff(alpha)) < 0.6       # continuous through pi/2
+    k = int(np.argmax(mt))
+    assert 0 < k < len(mt) - 1 and mt[-1] < mt[k] - 0.1                       # m_t turns back
+    assert np.all(stable[alpha < math.pi / 2 - 0.05]) and not np.any(stable[alpha > math.pi / 2 + 0.05])
+    folds = [s for s in branch.special if s["kind"] == "fold"]
+    assert len(folds) == 1 and len(branch.special) == 1
+    fold = folds[0]
+    # the discrete planar branch has its fold at alpha = pi/2 exactly (m_t ~ sin alpha): located to 1e-6
+    assert abs(fold["alpha"] - math.pi / 2) < 1e-6
+    assert fold["mt"] >= mt.max() - 1e-12
+    assert all(p["residual"] <= 1e-8 for p in branch.points)
+    table = json.loads(branch.to_json())
+    assert table["special"][0]["kind"] == "fold" and len(table["points"]) == len(branch.points)
+    csv = branch.to_csv().splitlines()
+    assert csv[0].split(",")[:3] == ["mt", "s", "dp_ds"] and len(csv) == len(branch.points) + 1
+
+
+def test_fold_against_closed_form():
+    """m_t a0^2/A1 = 1 at the fold: error O(1/n^2) (ratio ~4 from n = 20 to 40), Richardson to 3e-4."""
+    folds = []
+    for n in (20, 40):
+        _, sp = first_special(n, 1.0 / 0.67, 0.9)
+        assert sp["kind"] == "fold"
+        folds.append(sp["mt"])
+    e20, e40 = folds[0] - 1.0, folds[1] - 1.0
+    assert 3.5 < e20 / e40 < 4.5
+    assert abs((4 * folds[1] - folds[0]) / 3 - cf.loop_fold(1.0, 1.0)) < 3e-4
+
+
+def test_two_wave_bifurcation_and_branch_switching():
+    """A1/A2 = 5: the planar ring loses stability at sqrt(3 (2A - 5))/(A - 1) = 0.96825 before the fold; the
+    located point brackets the stability change of independent solves; the switched branch leaves the plane."""
+    ref, mode = cf.loop_threshold(1.0, 0.2, 1.0)
+    assert mode == 2 and abs(ref - 0.96825) < 1e-5
+    found = []
+    for n in (20, 40):
+        branch, sp = first_special(n, 0.2, 0.85)
+        assert sp["kind"] == "bifurcation" and sp["mt"] < branch.points[0]["mt"] + 0.3
+        found.append(sp["mt"])
+    e20, e40 = found[0] - ref, found[1] - ref
+    assert 0 < e40 < e20 and e20 / e40 > 3.0
+    assert abs((4 * found[1] - found[0]) / 3 - ref) / ref < 5e-3
+    # independent check of the location (n = 40): der.solve just below is stable, just above unstable
+    scene_of = loop(40, 0.2)
+    state = sp["state"]
+    below = der.solve(scene_of(sp["mt"] * (1 - 1e-4)), state=state)
+    above = der.solve(scene_of(sp["mt"] * (1 + 1e-4)), state=state)
+    assert below.stable and not above.stable
+    # branch switching onto the out-of-plane branch
+    switched = branch.switch(0, ds=0.05, max_steps=5, bounds=(0.5, 1.2))
+    assert len(switched.points) >= 4, switched.message
+    oop = [p["out_of_plane"] for p in switched.points]
+    assert oop[0] < 1e-8 and min(oop[1:]) > 1e-2
+    # its last point is an equilibrium by der.solve's own measure: it converges at once without moving
+    last = switched.states[-1]
+    check = der.solve(scene_of(switched.points[-1]["mt"]), state=last, stability=False)
+    assert check.iterations <= 1 and np.abs(check.state.q - last.q).max() < 1e-6
+
+
+def test_natural_continuation_stops_at_the_fold():
+    branch = der.continuation(loop(12, 1.0), 0.8, 1.2, method="natural", parameter="mt", ds=0.1, ds_min=1e-3,
+                              stability=False)
+    assert branch.status == "step_too_small"
+    assert 0.9 < branch.points[-1]["mt"] <= 1.1          # up to the fold of the 12-edge ring (~1.06), not past
+
+
+def test_bad_arguments_are_refused_before_any_work():
+    scene_of = loop(12, 1.0)
+    with pytest.raises(TypeError, match="scene_of"):
+        der.continuation("not a function", 0.1)
+    with pytest.raises(ValueError, match="ds_min <= ds <= ds_max"):
+        der.continuation(scene_of, 0.1, ds=1.0, ds_max=0.5)
+    with pytest.raises(ValueError, match="method"):
+        der.continuation(scene_of, 0.1, method="euler")
+    with pytest.raises(ValueError, match="bounds"):
+        der.continuation(scene_of, 0.1, bounds=(0.2, 0.3))
+    with pytest.raises(TypeError, match="grid"):
+        der.sweep(abs, 3, workers=0)
+    with pytest.raises(ValueError, match="workers"):
+        der.sweep(abs, {"x": [1]}, workers=-1)
+
+
+def ring_point(mt, n):
+    """A module-level task for the sweeps: one solve of the twisted ring (fails for mt past the fold)."""
+    rod = der.rod_from_shape(der.shapes.ring(1.0, n), 1.0, 1.0)
+    if mt > 1.2:
+        raise ValueError(f"mt = {mt} is past the fold")
+    r = der.solve(der.Scene(rod, loads=[der.twisting_moment(mt)]))
+    return {"alpha": float(np.nanmean(dg.alpha(rod, r.state))), "min_eigenvalue": r.min_eigenvalue, "theta": r.state.theta.copy()}
+
+
+GRID = {"mt": [0.2, 0.6, 1.5], "n": [12, 16]}
+
+
+def test_sweep_serial_reports_failures_without_stopping():
+    res = der.sweep(ring_point, GRID, workers=0, progress=False)
+    assert len(res) == 6 and [r["mt"] for r in res.rows] == [0.2, 0.2, 0.6, 0.6, 1.5, 1.5]
+    assert [r["ok"] for r in res.rows] == [True, True, True, True, False, False]
+    assert res.failures[0]["error"] == "ValueError: mt = 1.5 is past the fold"
+    assert abs(res.rows[0]["alpha"] - math.asin(0.2)) < 0.02
+    rows = json.loads(res.to_json())
+    assert "alpha" not in rows[4] and rows[4]["ok"] is False and rows[0]["alpha"] == res.rows[0]["alpha"]
+    lines = res.to_csv().splitlines()
+    assert lines[0] == "mt,n,alpha,min_eigenvalue,theta,ok,error" and float(lines[1].split(",")[2]) == res.rows[0]["alpha"]
+
+
+def test_sweep_on_a_local_cluster_is_bit_for_bit_the_serial_run():
+    pytest.importorskip("dask.distributed")
+    serial = der.sweep(ring_point, GRID, workers=0, progress=False)
+    cluster = der.sweep(ring_point, GRID, workers=2, progress=False)
+    assert cluster.workers == 2 and len(cluster) == len(serial)
+    assert [r["ok"] for r in cluster.rows] == [True, True, True, True, False, False]
+    for a, b in zip(serial.rows, cluster.rows):
+        assert a.keys() == b.keys()
+        for k in a:
+            if isinstance(a[k], np.ndarray):
+                assert a[k].tobytes() == b[k].tobytes()
+            else:
+                assert a[k] == b[k] or (a[k] is None and b[k] is None), k
+
+
+def test_import_der_loads_neither_dask_nor_matplotlib():
+    code = ("import sys, der; heavy = [m for m in sys.modules if m.split('.')[0] in "
+            "('dask', 'distributed', 'matplotlib', 'tqdm', 'pandas')]; print(heavy)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"

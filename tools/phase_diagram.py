@@ -9,7 +9,7 @@ grid runs through ``der.sweep`` twice -- serially and on a Dask cluster (a local
 one at ``--scheduler``) -- and the two tables must agree bit for bit. A no-op sweep on the same cluster
 measures the per-task overhead.
 
-    python tools/phase_diagram.py [--json] [--scheduler tcp://HOST:PORT] [--workers 2] [--n 20] [--count 8]
+    python tools/phase_diagram.py [--json] [--scheduler tcp://HOST:PORT] [--workers 2] [--n 32] [--count 16]
                                   [--png docs/figures/phase_diagram.png] [--csv PATH] [--no-serial]
 
 Last line with --json: {"points", "worst_boundary_error", "serial_s", "cluster_s", "workers", ...}.
@@ -20,7 +20,12 @@ import os
 import sys
 import time
 
-import numpy as np
+# one BLAS thread, as in Dask's workers (its nanny sets these): the serial run is then the same arithmetic, bit
+# for bit, and the comparison fair (multithreaded BLAS on 2 shared cores only spins)
+for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
+
+import numpy as np  # noqa: E402
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
@@ -140,8 +145,8 @@ def main(argv=None):
     ap.add_argument("--scheduler", default=None, help="address of a running Dask scheduler (tcp://HOST:PORT); "
                     "default: a local cluster of --workers processes")
     ap.add_argument("--workers", type=int, default=2, help="local cluster size (default 2)")
-    ap.add_argument("--n", type=int, default=20, help="coarse number of edges (the fine one is 2n; default 20)")
-    ap.add_argument("--count", type=int, default=8, help="number of A1/A2 values (default 8)")
+    ap.add_argument("--n", type=int, default=32, help="coarse number of edges (the fine one is 2n; default 32)")
+    ap.add_argument("--count", type=int, default=16, help="number of A1/A2 values (default 16)")
     ap.add_argument("--noop", type=int, default=200, help="no-op tasks for the overhead measurement (default 200)")
     ap.add_argument("--no-serial", action="store_true", help="skip the serial run (no bit-for-bit check)")
     ap.add_argument("--png", default=os.path.join(ROOT, "docs", "figures", "phase_diagram.png"))

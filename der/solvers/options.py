@@ -119,6 +119,7 @@ class SolveResult:
         of the stiffness pencil (K, M), i.e. squared natural frequencies, with rigid-body and other symmetry
         modes removed. ``stable`` is False if one has a negative real part (divergence); ``flutter`` is True if
         complex eigenvalues appear among the lowest (circulatory loads: the undamped rod would flutter).
+    stability_time : seconds spent in the stability analysis (not part of ``wall_time``; 0 if not run).
     energy : energy by term at the final state.
     history : residual after each iteration/check.
     """
@@ -143,6 +144,7 @@ class SolveResult:
     dt: float | None = None
     residual_floor: float = float("nan")
     residual_per_length: float = float("nan")
+    stability_time: float = 0.0
 
 
 class ConvergenceError(RuntimeError):

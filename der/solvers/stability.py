@@ -381,7 +381,7 @@ def _banded_lowest(system, K, idx, mass, m, V, k, symmetric, scale):
         A = K
     OPinv = spla.LinearOperator((n, n), matvec=op, dtype=float)
     kk = min(k, n - 2)
-    ncv = min(n - 1, max(2 * kk + 1, 20))
+    ncv = min(n - 1, max(2 * kk + 1, 12))   # the inverted spectrum decays fast: few Lanczos vectors
     if symmetric:
         ev, vec = spla.eigsh(A, k=kk, M=Mdiag, sigma=sigma, which="LM", OPinv=OPinv, ncv=ncv)
     else:

@@ -172,3 +172,28 @@ def band_negative_pivots(ab, kl, ku, perm, shift, mass, fixed):
                     v -= L[i, i - j] * L[k, s] * D[j]
             L[i, s_ik] = v / dk
     return negatives
+
+
+class BandLU:
+    """LU factorisation of a band matrix (LAPACK dgbtrf), reused for any number of solves (dgbtrs): O(n b^2)
+    once, O(n b) per solve, in original DOF order. ``ab`` (general-band storage, ``kl`` spare rows) is
+    overwritten by the factors. ``info > 0`` marks an exactly singular pivot (solves are then invalid)."""
+
+    def __init__(self, ab, kl, ku, perm):
+        from scipy.linalg.lapack import dgbtrf
+
+        self.kl, self.ku, self.perm = kl, ku, perm
+        self.lu, self.piv, self.info = dgbtrf(ab, kl, ku, overwrite_ab=True)
+
+    def solve(self, rhs, trans=False):
+        """x with A x = rhs (or A^T x = rhs with ``trans``); ``rhs`` (n,) or (n, k) in DOF order."""
+        from scipy.linalg.lapack import dgbtrs
+
+        if self.info > 0:
+            raise np.linalg.LinAlgError(f"band matrix exactly singular (zero pivot {self.info})")
+        b = np.empty_like(rhs, dtype=float)
+        b[self.perm] = rhs
+        x, info = dgbtrs(self.lu, self.kl, self.ku, b if b.ndim == 2 else b[:, None], self.piv,
+                         trans=1 if trans else 0)
+        x = x if b.ndim == 2 else x[:, 0]
+        return x[self.perm]

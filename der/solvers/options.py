@@ -171,6 +171,7 @@ class SolveResult:
         of the stiffness pencil (K, M), i.e. squared natural frequencies, with rigid-body and other symmetry
         modes removed. ``stable`` is False if one has a negative real part (divergence); ``flutter`` is True if
         complex eigenvalues appear among the lowest (circulatory loads: the undamped rod would flutter).
+    stability_time : seconds spent in the stability analysis (not part of ``wall_time``; 0 if not run).
     energy : energy by term at the final state.
     history : residual after each iteration/check.
     compile_time : seconds spent compiling (or loading from numba's cache) der's kernels before this solve,
@@ -215,6 +216,7 @@ class SolveResult:
     dt: float | None = None
     residual_floor: float = float("nan")
     residual_per_length: float = float("nan")
+    stability_time: float = 0.0
     compile_time: float = 0.0
     tol: float = float("nan")
 

@@ -15,7 +15,8 @@ import der.solvers.implicit as implicit_module
 
 ROOT = Path(__file__).resolve().parents[1]
 RERUN = Path(sys.executable).parent / "rerun"
-ENV = dict(os.environ, RERUN_ANALYTICS="0")
+# the subprocesses import this checkout's der, not whichever one is installed
+ENV = dict(os.environ, RERUN_ANALYTICS="0", PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
 
 
 def verify(path):

@@ -115,9 +115,9 @@ def test_scenario_invalid_input_exits_2_with_one_line():
     assert out.returncode == 2
     assert out.stdout == ""
     lines = out.stderr.strip().splitlines()
-    assert len(lines) == 1 and "--n must be an integer >= 2" in lines[0]
+    assert len(lines) == 1 and "--n must be an integer from 2 to 1,000,000" in lines[0]
     out = run_scenario("--A2", "-1")
-    assert out.returncode == 2 and "--A2 must be > 0" in out.stderr
+    assert out.returncode == 2 and "--A2 must be in [1e-06, 1e+06]" in out.stderr
 
 
 def test_scenario_not_converged_exits_3_with_json():

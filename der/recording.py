@@ -22,7 +22,7 @@ The recording opens on a blueprint: the rod in 3-D beside the residual and energ
 
 Cost: by default a frame is skipped when writing it would take the time spent recording above half of
 ``max_overhead`` (10 %) of the time since the recording started; the first and the final state are always
-written, and the first 20 ms of frames are free (a short solve of a small rod still shows its iterations).
+written, and the first 50 ms of frames are free (a short solve of a small rod still shows its iterations).
 ``max_overhead=None`` writes every iteration.
 The file is flushed about once a second, so a killed run loses at most that; a SIGKILL also loses the footer
 (``rerun rrd verify`` says "Missing RRD footer"): README, "Recordings", gives the command that rewrites it.
@@ -39,7 +39,7 @@ from .geometry import material_frames, tangents
 
 WRITHE_MAX_EDGES = 2000
 FLUSH_SECONDS = 1.0
-MIN_BUDGET_SECONDS = 0.02   # a short solve of a small rod still shows its iterations (a frame costs ~1 ms there)
+MIN_BUDGET_SECONDS = 0.05   # a short solve of a small rod still shows its iterations (a frame costs ~1 ms there)
 
 
 def _diverging(values, scale):

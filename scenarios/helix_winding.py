@@ -176,7 +176,7 @@ def _plot(fig_no, curves, points, path):
     plt = pyplot("helix_winding.py")
     if plt is None:
         return
-    fig, ax = plt.subplots(figsize=(7, 5))
+    fig, ax = plt.subplots(figsize=(9.5, 5))
     for i, c in enumerate(curves):
         col = f"C{i}"
         if fig_no == 1:
@@ -200,7 +200,8 @@ def _plot(fig_no, curves, points, path):
     else:
         ax.set(xlabel=r"overtwist $\varphi$", ylabel=r"axial elongation $\eta$",
                title=r"Figure 2: $A = 0.67$, $\lambda = 0.6$")
-    ax.legend(fontsize=7, ncol=3)
+    # outside the axes: inside, it covered the P0 = 0.1 curves and the phi = 0.2 point of Figure 2
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
 

@@ -157,7 +157,8 @@ def _picture(base, items, kappa0, p):
     plt = pyplot("twisted_ring.py")
     if plt is None:
         return
-    fig = plt.figure(figsize=(3.0 * len(items), 3.4))
+    fig = plt.figure(figsize=(3.0 * len(items) + 0.8, 3.6))
+    elev, azim = 25, -60
     scale = max(float(np.abs(dg.material_twist_density(base.with_imposed_twist(o["twist"]), st)).max())
                 for o, st in items) * p.a0
     for i, (obs, state) in enumerate(items):
@@ -173,12 +174,19 @@ def _picture(base, items, kappa0, p):
         ax.set(xlim=(-lim, lim), ylim=(-lim, lim), zlim=(-lim, lim))
         ax.set_box_aspect((1, 1, 1), zoom=1.3)
         ax.set_axis_off()
-        ax.view_init(elev=25, azim=-60)
+        ax.view_init(elev=elev, azim=azim)
         ax.set_title(f"Lk = {obs['linking_number']:.3f}\nTw = {obs['twist_total']:.3f}, "
                      f"Wr = {obs['writhe']:.3f}", fontsize=9)
-    fig.suptitle(f"twisted ring, kappa0 a0 = {kappa0 * p.a0:g}, A1/A2 = {p.A1 / p.A2:.3g}, n = {p.n}; colour: "
-                 f"material twist, blue -{scale:.2g} to red +{scale:.2g} per a0", fontsize=9)
-    fig.subplots_adjust(left=0, right=1, bottom=0, top=0.82, wspace=0)
+    fig.suptitle(f"twisted ring, kappa0 a0 = {kappa0 * p.a0:g}, A1/A2 = {p.A1 / p.A2:.3g}, n = {p.n}; each ring centred, "
+                 f"seen from elevation {elev} deg, azimuth {azim} deg (z up, same scale)", fontsize=9)
+    fig.subplots_adjust(left=0, right=1 - 0.8 / (3.0 * len(items) + 0.8), bottom=0.02, top=0.80, wspace=0)
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    cax = fig.add_axes([1 - 0.65 / (3.0 * len(items) + 0.8), 0.12, 0.012 * 12 / (3.0 * len(items) + 0.8), 0.6])
+    bar = fig.colorbar(ScalarMappable(Normalize(-scale, scale), plt.cm.coolwarm), cax=cax)
+    bar.set_label("material twist x a0", fontsize=8)
+    bar.ax.tick_params(labelsize=7)
     fig.savefig(p.png, dpi=110)
 
 

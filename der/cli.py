@@ -47,9 +47,10 @@ from .warmup import warmup
 
 EXIT_OK, EXIT_INVALID, EXIT_FAILED = 0, 2, 3
 
-# The largest rod the scenarios accept: a solve needs about 2 kB per edge (banded factorisation, work arrays)
-# and the stability analysis more, so 10^6 edges already take gigabytes; beyond it a run would only fail for
-# memory after a long setup. MemoryError during a run is still caught (exit 3).
+# The largest rod the scenarios accept: a solve needs about 4 kB per edge (NumPy peak 372 MB at n = 100,000,
+# README "At scale": banded factorisation, work arrays) and the stability analysis more, so 10^6 edges already
+# take gigabytes; beyond it a run would only fail for memory after a long setup (--n 100000000 was numpy's
+# _ArrayMemoryError traceback). A MemoryError during a run is still caught (exit 3).
 MAX_EDGES = 1_000_000
 
 
@@ -115,6 +116,10 @@ class SolveRunner:
                 self.recorder.log_rest()
             record = self.recorder
             self.recorder.offset = self.offset
+            if scene.rod.n_edges == self.recorder.rod.n_edges:
+                # a continuation changes the rod (e.g. its welded twist) but not its discretisation: Lk and the
+                # twist colours are those of the rod being solved
+                self.recorder.rod = scene.rod
         result = _solvers.solve(scene, state=state, solver=self.args.solver, record=record,
                                 raise_on_failure=False, **options)
         self.offset += result.iterations + 1

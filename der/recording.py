@@ -185,11 +185,13 @@ class Recorder:
         if np.isfinite(residual) and residual > 0:
             rec.log("residual/log10", rr.Scalars(float(np.log10(residual))))
         if rod.closed and rod.n_edges <= WRITHE_MAX_EDGES:
-            # O(n^2), tens of ms at n = 2,000: only when the budget has room for it (the final frame may use all of
-            # the budget, the others half)
+            # O(n^2), tens of ms at n = 2,000: only when the budget has room for it (the final frame of a solve
+            # may use all of the budget, the others half), and always at the end of a solve when it costs less than
+            # a frame (small rings: each solve of a continuation ends with its Lk, Tw, Wr)
             cost = self.spent_per_writhe()
-            if (self.max_overhead is None or self._within_budget(self.frame_cost + cost)
-                    or (final and self.spent + cost <= self.max_overhead * (time.perf_counter() - self.t_start))):
+            final_ok = final and (cost <= self.frame_cost or
+                                  self.spent + cost <= self.max_overhead * (time.perf_counter() - self.t_start))
+            if self.max_overhead is None or final_ok or self._within_budget(self.frame_cost + cost):
                 t0 = time.perf_counter()
                 lk, tw, wr = dg.linking_number(rod, state)
                 self._writhe_cost = time.perf_counter() - t0

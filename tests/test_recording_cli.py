@@ -382,3 +382,26 @@ def test_killed_run_recovers_with_the_documented_command(tmp_path):
     from der.recording import read_centrelines
     its, _ = read_centrelines(fixed)
     assert len(its) >= 2
+
+
+def test_a_continuation_records_the_linking_number_of_the_rod_being_solved(tmp_path):
+    """twisted_ring's sweep solves a new rod (its weld's twist) at each step into ONE recording: each solve's last
+    row carries that step's Lk = twist / 2 pi (it showed the first step's rod throughout)."""
+    import argparse
+
+    from der.cli import SolveRunner
+    from der.recording import read_scalars
+
+    mod = _load("twisted_ring")
+    p = argparse.Namespace(**{**{q[0]: q[1] for q in mod.PARAMETERS}, "n": 30, "sweep": 3, "twist": 3.0,
+                              "solver": "implicit", "tol": 1e-8, "rrd": str(tmp_path / "c.rrd"),
+                              "max_iterations": None, "time_budget": None})
+    mod.run.validate(p)
+    runner = SolveRunner(p)
+    out = mod.run(p, runner)
+    runner.close()
+    its, lk = read_scalars(p.rrd, "ring/linking_number")
+    ends = np.cumsum([r.iterations + 1 for r in runner.results]) - 1
+    got = {it: v for it, v in zip(its, lk)}
+    assert [round(got[e], 9) for e in ends] == [round(t / (2 * np.pi), 9) for t in (1.0, 2.0, 3.0)]
+    assert out["lk_error_max"] < 1e-9

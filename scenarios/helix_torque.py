@@ -29,7 +29,7 @@ PARAMETERS = [
     ("kappa0", 1.0, float, "natural curvature", POSITIVE),
     ("omega0", 0.6, float, "natural torsion (> 0 right-handed, < 0 left-handed)",
      Range(lambda p: -100 * p.kappa0, lambda p: 100 * p.kappa0, nonzero=True,
-           why="100 kappa0; a planar ring has no axis to pull along")),
+           why="|omega0| up to 100 kappa0, and not 0: a planar ring has no axis to pull along")),
     ("P", 1e-5, float, "tangential end force F_t(l) (small: the closed form is linear)",
      Range(lambda p: -p.A1 * p.kappa0 ** 2, lambda p: p.A1 * p.kappa0 ** 2,
            why="|P| <= A1 kappa0^2: the closed form is linear in the loads")),

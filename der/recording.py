@@ -20,8 +20,9 @@ Entities:
 
 The recording opens on a blueprint: the rod in 3-D beside the residual and energy plots.
 
-Cost: by default a frame is skipped when writing it would take the time spent recording above half of
-``max_overhead`` (10 %) of the time since the recording started; the first and the final state are always
+Cost: by default a frame is skipped when writing it would take the time spent recording above 40 % of
+``max_overhead`` (10 %) of the time since the recording started (the rest is for the first and final frames
+and rerun's writer thread); the first and the final state are always
 written, and the first 50 ms of frames are free (a short solve of a small rod still shows its iterations).
 ``max_overhead=None`` writes every iteration.
 The file is flushed about once a second, so a killed run loses at most that; a SIGKILL also loses the footer
@@ -127,12 +128,12 @@ class Recorder:
         self.pending = (seq, state.copy(), float(residual), dict(energies), time.perf_counter() - self.t_start)
 
     def _within_budget(self, cost=None):
-        """Whether a frame of ``cost`` seconds (default: the last frame's) fits in half the overhead budget; the
-        other half is for the first and final frames and rerun's writer thread."""
+        """Whether a frame of ``cost`` seconds (default: the last frame's) fits in 40 % of the overhead budget; the
+        rest is for the first and final frames (and a final writhe) and rerun's writer thread."""
         if self.max_overhead is None:
             return True
         cost = self.frame_cost if cost is None else cost
-        budget = max(0.5 * self.max_overhead * (time.perf_counter() - self.t_start), MIN_BUDGET_SECONDS)
+        budget = max(0.4 * self.max_overhead * (time.perf_counter() - self.t_start), MIN_BUDGET_SECONDS)
         return self.spent + cost <= budget
 
     def _write_pending(self, force=False):
@@ -186,11 +187,11 @@ class Recorder:
             rec.log("residual/log10", rr.Scalars(float(np.log10(residual))))
         if rod.closed and rod.n_edges <= WRITHE_MAX_EDGES:
             # O(n^2), tens of ms at n = 2,000: only when the budget has room for it (the final frame of a solve
-            # may use all of the budget, the others half), and always at the end of a solve when it costs less than
+            # may use 80 % of the budget, the others 40 %), and always at the end of a solve when it costs less than
             # a frame (small rings: each solve of a continuation ends with its Lk, Tw, Wr)
             cost = self.spent_per_writhe()
             final_ok = final and (cost <= self.frame_cost or
-                                  self.spent + cost <= self.max_overhead * (time.perf_counter() - self.t_start))
+                                  self.spent + cost <= 0.8 * self.max_overhead * (time.perf_counter() - self.t_start))
             if self.max_overhead is None or final_ok or self._within_budget(self.frame_cost + cost):
                 t0 = time.perf_counter()
                 lk, tw, wr = dg.linking_number(rod, state)

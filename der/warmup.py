@@ -34,24 +34,31 @@ def _dispatchers():
                 yield obj
 
 
+# the kernels a solve calls from Python: numba compiles (or loads) exactly these, each with the kernels it
+# calls inlined into it (numba's cache index tracks only a kernel's own source file, so an inlined callee's
+# stale index means nothing: it is never loaded on its own)
+ENTRY_KERNELS = (("der.scene", "evaluate"), ("der.geometry", "transport_frames"), ("der.geometry", "edge_frames"),
+                 ("der.diagnostics", "_edge_forces"), ("der.solvers.explicit", "_fire_run"))
+
+
 def cache_is_cold():
     """Whether the next solve would compile der's kernels rather than load them from numba's on-disk cache.
 
-    Cold when the central kernel (``der.scene.evaluate``) has no cached version, or when any kernel's cache
-    index is stale (its source file changed since it was compiled). Kernels compiled in this process count
-    as warm. Never raises: if numba's cache cannot be inspected, it answers True (the message is then shown
-    once, possibly needlessly).
+    Cold when one of the kernels a solve calls from Python (``ENTRY_KERNELS``, the central one
+    ``der.scene.evaluate`` among them) has no cached version or a stale one (its source file changed since it
+    was compiled). Kernels compiled in this process count as warm. Never raises: if numba's cache cannot be
+    inspected, it answers True (the message is then shown once, possibly needlessly).
     """
+    import importlib
+
     try:
-        for disp in _dispatchers():
+        for module, name in ENTRY_KERNELS:
+            disp = getattr(importlib.import_module(module), name)
             if disp.signatures:
                 continue
             cache_file = disp._cache._cache_file
-            exists = os.path.exists(cache_file._index_path)
-            if exists and not cache_file._load_index():
-                return True                      # stale: the source changed
-            if not exists and disp.__name__ == "evaluate" and disp.__module__ == "der.scene":
-                return True                      # never compiled here
+            if not os.path.exists(cache_file._index_path) or not cache_file._load_index():
+                return True                      # never compiled here, or the source changed
         return False
     except Exception:
         return True

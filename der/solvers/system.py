@@ -160,6 +160,17 @@ def load_scales(system, state):
     f_int = float(row_norms(F).max()) if F.size else 0.0
     m_int = float(M.max()) if M.size else 0.0
     L = rod.length
+    # internal forces no larger than their own round-off (rounding every coordinate by eps |x| moves a node
+    # force by ~ eps |x| (A / h^3 + k) and a moment by ~ eps |x| A / h^2) define no scale: an unloaded rod at
+    # rest would otherwise be judged against its round-off, with a residual of order 1 for ever
+    X = max(float(np.abs(state.q.reshape(-1, 4)[:, :3]).max()), L)
+    h = float(rod.l_bar.min())
+    A = max(rod.A1, rod.A2)
+    eps100 = 100.0 * np.finfo(float).eps
+    if f_int <= eps100 * X * (A / h ** 3 + float(plan.k_stretch.max(initial=0.0))):
+        f_int = 0.0
+    if m_int <= eps100 * X * A / h ** 2:
+        m_int = 0.0
     F_raw = max(system.applied_force, f_int)
     M_raw = max(system.applied_moment, m_int)
     if F_raw == 0.0 and M_raw == 0.0:

@@ -9,7 +9,16 @@ limit ``2 / omega_max``, with ``omega_max^2`` bounded by Gershgorin's theorem on
 mode -- stretch, bend or twist -- is the stiffest. By default the step is capped at ``safety / omega_max``, half
 the limit, where a step from rest lowers the energy of every mode. A step that would raise the total energy is rejected and
 restarted from rest (for circulatory loads, which can feed energy in, only a large rise is: an unstable step).
-The whole inner loop is one numba kernel; Python only checks convergence every ``check_every`` steps.
+
+An inextensible rod moves on its constraint manifold |e_j| = l_j (``der.solvers.projection``): the force is
+split into its tangent part and the tension (the multiplier, kept in ``state.lam``), positions are projected
+back after each step (the fast projection of Goldenthal et al. 2007) and velocities onto the tangent space
+(RATTLE). No axial penalty enters the dynamics, so the stable step is set by bending and twisting alone (plus
+the geometric stiffness of the tension); the implicit solver's penalty is put back for the stability analysis.
+
+The inner loop is one numba kernel. Python checks convergence after each call; a call runs at most
+``check_every`` steps and about CHUNK_SECONDS of wall time (sized from the measured cost of a step), so the
+time budget and Ctrl-C are honoured promptly. Every loop is bounded by a counter that always advances.
 """
 import time
 
@@ -294,6 +303,8 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
                 state.copy_from(last_good)
                 status, message = "nonfinite", f"non-finite force at step {steps}; last finite state kept"
                 break
+            if project:
+                _initial_tension(system, state, w)   # the multipliers at the state the kernel ended in
             last_good.copy_from(state)
             energies.append(e_total)
             strain = max_strain(system, state) if rod.inextensible else 0.0
@@ -394,8 +405,9 @@ def _chunk_steps(options, steps, step_cost, elapsed):
 
 
 def _initial_tension(system, state, w):
-    """Tension balancing the starting state's force (the multiplier of the force projection) in state.lam, so
-    that the first stable-step estimate includes its geometric stiffness."""
+    """The tension that balances the force at ``state`` as well as the edge lengths can (the multiplier of the
+    force projection) into state.lam: before the run, so that the first stable-step estimate includes its
+    geometric stiffness, and after each kernel call, so that the residual checked is the projected one."""
     evaluate_system(system, state, 1)
     f = system.fext - system.grad
     f[system.fixed] = 0.0

@@ -35,6 +35,7 @@ from .system import (
 
 STATUS_RUNNING, STATUS_CONVERGED, STATUS_NONFINITE = 0, 1, 2
 STALL_STEPS = 20_000   # no halving of the residual in this many steps (or a quarter of the run): stalled
+NOISE_FACTOR = 3.0     # at the floor, a negative power below this many standard deviations of its noise is ignored
 
 
 @njit(cache=True)
@@ -83,7 +84,7 @@ def _zero_fixed(ab, system):
 @njit(cache=True)
 def _fire_run(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol, n_steps, dt, dt_max,
               alpha, n_pos, n_min, f_inc, f_dec, alpha0, f_alpha, kl, ku, perm, e_total, work_done, guard,
-              project, w, closed, target, max_strain):
+              project, w, closed, target, max_strain, noise):
     """Run up to n_steps FIRE steps in place. Returns (status, steps, residual, dt, alpha, n_pos, e_total,
     work_done, rejected, dt_max): a step rejected near the cap also lowers the cap by 10 %, so that the integrator
     settles below the step at which its energy error shows (fewer restarts: FIRE keeps its momentum).
@@ -93,7 +94,8 @@ def _fire_run(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol,
     to ``lam``), and after each step the positions are projected back onto the manifold (fast projection) and
     the velocity onto its tangent space (RATTLE). ``w`` is the inverse mass (zero on fixed DOFs); a step whose
     projection leaves a strain above ``max_strain`` is rejected like an energy-raising one; the projection
-    iterates only while the strain exceeds ``target``, so that tiny steps are not moved by its round-off."""
+    iterates only while the strain exceeds ``target``, so that tiny steps are not moved by its round-off.
+    ``noise``: the round-off of each force component once the solve is at the round-off floor (else zeros)."""
     n = q.shape[0]
     grad = np.zeros(n)
     fext = np.zeros(n)
@@ -124,11 +126,15 @@ def _fire_run(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol,
         power = 0.0
         vnorm2 = 0.0
         fnorm2 = 0.0
+        pnoise2 = 0.0
         for i in range(n):
             power += f[i] * v[i]
             vnorm2 += mass[i] * v[i] * v[i]
             fnorm2 += f[i] * f[i] / mass[i]
-        if power > 0.0:
+            pnoise2 += (noise[i] * v[i]) ** 2
+        # at the round-off floor a negative power within the force's round-off noise is no overshoot: that noise
+        # would restart FIRE every few steps and the slow modes would never gain momentum (noise = 0 before)
+        if power > -NOISE_FACTOR * np.sqrt(pnoise2):
             if fnorm2 > 0.0:
                 c = alpha * np.sqrt(vnorm2 / fnorm2)
                 for i in range(n):
@@ -275,6 +281,7 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
     guard = 64 * np.finfo(float).eps if conservative else 1e-6
     best, best_step = np.inf, 0
     best_err = np.inf     # the last Newton error estimate at the round-off floor
+    noise = np.zeros(rod.n_dof)
     floor = np.nan
     step_cost = None      # measured seconds per step: sizes the chunks
     try:
@@ -293,7 +300,7 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
                 plan, state.q, state.d1, state.tangents, state.reference_twist, state.lam, v, system.mass,
                 fixed, inv_scale, options.tol, n, dt, dt_max, alpha, n_pos, options.fire_n_min, options.fire_f_inc,
                 options.fire_f_dec, options.fire_alpha, options.fire_f_alpha, system.kl, system.ku, system.perm,
-                e_total, work_done, guard, project, w, rod.closed, PROJECTION_TARGET, proj_strain)
+                e_total, work_done, guard, project, w, rod.closed, PROJECTION_TARGET, proj_strain, noise)
             if done > 0:
                 cost = (time.perf_counter() - t_chunk) / done
                 step_cost = cost if step_cost is None else max(cost, 0.5 * step_cost)
@@ -345,8 +352,11 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
                         system.plan.k_stretch[:] = 0.0
                     if err > options.displacement_tol and err < 0.5 * best_err:
                         # the max-norm residual is round-off noise now, but the slow modes still converge (the
-                        # error estimate halved since the last look): go on (the step and time limits apply)
+                        # error estimate halved since the last look): go on (the step and time limits apply),
+                        # with FIRE's restarts blind to a power within the noise (floor x scale per component)
                         best_err = err
+                        noise = floor / inv_scale
+                        noise[fixed] = 0.0
                     elif err <= options.displacement_tol:
                         status = "converged"
                         message = (msg + f"; a Newton correction would move it by {err:.1e} of the displacement"

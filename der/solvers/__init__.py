@@ -10,7 +10,7 @@ import numpy as np
 from .options import (
     STATUSES, ConvergenceError, LockedRodWarning, RoundoffFloorWarning, SolveResult, SolverOptions,
 )
-from .system import build_system, check_equilibrium_exists, locked_rod_note, prepare_state
+from .system import build_system, numerical_failure, check_equilibrium_exists, locked_rod_note, prepare_state
 
 SOLVERS = ("implicit", "explicit")
 
@@ -116,7 +116,11 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
         else:
             from .explicit import solve_explicit
 
-            result = solve_explicit(system, work, options, progress, recorder)
+            start = work.copy()
+            try:
+                result = solve_explicit(system, work, options, progress, recorder)
+            except (ArithmeticError, np.linalg.LinAlgError) as exc:
+                result = numerical_failure(system, work, start, exc, "explicit")
         if result.status != "interrupted":
             note = locked_rod_note(system, result.state)
             if note:

@@ -97,7 +97,9 @@ def _dead_directions(scene):
             v = np.asarray(load.torque, float)
         else:
             continue
-        if np.linalg.norm(v) > 0:
+        big = np.abs(v).max()
+        if big > 0 and np.isfinite(big):
+            v = v / big                     # first scaled to order 1: the norm of a 1e300 force overflows
             dirs.append(v / np.linalg.norm(v))
     return dirs
 
@@ -186,7 +188,7 @@ def symmetry_modes(system, state):
         # w x d = 0, i.e. [d]x w = 0, on the rotation coefficients (columns rescaled like G's)
         cross = np.array([[0, -d[2], d[1]], [d[2], 0, -d[0]], [-d[1], d[0], 0]])
         r = np.hstack([np.zeros((3, 3)), cross / col[None, 3:]])
-        rows.append(r / np.abs(r).max())
+        rows.append(r / max(np.abs(r).max(), 1e-300))
     N = _null_space(np.vstack(rows))
     for k in range(N.shape[1]):
         modes.append(G @ N[:, k])

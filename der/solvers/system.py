@@ -503,3 +503,26 @@ def locked_rod_note(system, state):
     return (f"the inextensible rod is locked between fixed ends; give it EA or a sliding clamp (its constraint "
             f"tension {tension:.3g} is {tension / bending:.3g} times the bending scale A1/L^2 = {bending:.3g}, "
             f"and its loads apply at most {loads:.3g})")
+
+
+def numerical_failure(system, state, start, exc, solver):
+    """The SolveResult of a solve that a numerical error ended (a division by zero or a failed factorisation
+    inside a kernel, e.g. dependent constraints: an inextensible rod held straight between two fixed nodes has
+    an indeterminate tension): status "nonfinite", the state the solver was at if it is finite (else the start),
+    never an exception from inside the solve."""
+    if solver == "explicit" and system.rod.inextensible:
+        system.plan.k_stretch[:] = system.k_initial    # the projected explicit solve zeroes the penalty
+        state.penalty = system.k_initial.copy()
+    finite = all(np.isfinite(a).all() for a in (state.q, state.d1, state.reference_twist, state.lam))
+    kept = state if finite else start
+    try:
+        evaluate_system(system, kept, 1)
+    except ArithmeticError:            # finite, but degenerate (an edge collapsed): back to the start
+        kept, finite = start, False
+        evaluate_system(system, kept, 1)
+    residual = residual_norm(system, residual_vector(system), load_scales(system, kept))
+    return final_result(system, kept, "nonfinite", residual=float(residual), iterations=0, wall_time=0.0,
+                        message=f"numerical failure in the {solver} solver ({type(exc).__name__}: {exc}); "
+                        f"{'the last' if finite else 'the starting'} finite state is kept (dependent constraints, "
+                        "e.g. an inextensible rod held straight between fixed nodes, make its tension "
+                        "indeterminate: give it EA)", solver=solver)

@@ -17,10 +17,11 @@ import numpy as np
 from numba import njit
 
 from ..geometry import transport_frames
+from ..linalg import condense_vector
 from ..scene import evaluate, make_plan
 from .system import (
-    INTERRUPTS, constraint_residual, energy_terms, evaluate_system, final_result, floor_verdict, is_interrupt,
-    load_scales, max_strain, multiplier_update, newton_error_estimate, residual_norm, residual_vector,
+    INTERRUPTS, constrain_system, constraint_residual, energy_terms, evaluate_system, final_result, floor_verdict,
+    is_interrupt, load_scales, max_strain, multiplier_update, newton_error_estimate, residual_norm, residual_vector,
 )
 
 STATUS_RUNNING, STATUS_CONVERGED, STATUS_NONFINITE = 0, 1, 2
@@ -65,14 +66,13 @@ def stable_time_step(system, state):
 
 
 def _zero_fixed(ab, system):
-    from ..linalg import constrain_band
-
-    constrain_band(ab, system.kl, system.ku, system.perm, system.fixed, 0.0)
+    constrain_system(system, ab, 0.0)     # T^T K T on the end supports' free variables, held DOFs removed
 
 
 @njit(cache=True)
 def _fire_run(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol, n_steps, dt, dt_max,
-              alpha, n_pos, n_min, f_inc, f_dec, alpha0, f_alpha, kl, ku, perm, e_total, work_done, guard):
+              alpha, n_pos, n_min, f_inc, f_dec, alpha0, f_alpha, kl, ku, perm, e_total, work_done, guard,
+              link_dep, link_const, tri_dep, tri_master, tri_coef):
     """Run up to n_steps FIRE steps in place. Returns (status, steps, residual, dt, alpha, n_pos, e_total,
     work_done, rejected, dt_max): a step rejected near the cap also lowers the cap by 10 %, so that the integrator
     settles below the step at which its energy error shows (fewer restarts: FIRE keeps its momentum)."""
@@ -91,7 +91,9 @@ def _fire_run(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol,
     for step in range(n_steps):
         residual = 0.0
         for i in range(n):
-            f[i] = 0.0 if fixed[i] else fext[i] - grad[i]
+            f[i] = fext[i] - grad[i]
+        condense_vector(f, tri_dep, tri_master, tri_coef, fixed)   # end supports: forces on the free variables
+        for i in range(n):
             r = abs(f[i]) * inv_scale[i]
             if r > residual:
                 residual = r
@@ -131,6 +133,10 @@ def _fire_run(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol,
             if not fixed[i]:
                 v[i] += dt * f[i] / mass[i]
                 q[i] += dt * v[i]
+        for k in range(link_dep.shape[0]):      # end supports: dependents follow their masters
+            q[link_dep[k]] = link_const[k]
+        for k in range(tri_dep.shape[0]):
+            q[tri_dep[k]] += tri_coef[k] * q[tri_master[k]]
         ok = transport_frames(q, plan.edge_nodes, plan.vertex_edges, t_old, d1_old, tw_old, tangents, d1, twist)
         fext_old_dot = 0.0
         for i in range(n):
@@ -216,7 +222,8 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
                 system.plan, state.q, state.d1, state.tangents, state.reference_twist, state.lam, v, system.mass,
                 fixed, inv_scale, options.tol, n, dt, dt_max, alpha, n_pos, options.fire_n_min, options.fire_f_inc,
                 options.fire_f_dec, options.fire_alpha, options.fire_f_alpha, system.kl, system.ku, system.perm,
-                e_total, work_done, guard)
+                e_total, work_done, guard, system.links.dep, system.links.const, system.links.tri_dep,
+                system.links.tri_master, system.links.tri_coef)
             steps += done
             rejected_total += rejected
             check += 1

@@ -20,11 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constraints import apply_targets, fixed_dofs
+from ..constraints import NO_LINKS, apply_targets, build_links, enforce_links
 from ..diagnostics import _edge_forces
 from ..energies.stretch import elongations
 from ..geometry import edge_frames, transport_frames
-from ..linalg import band_layout, band_matvec, new_band
+from ..linalg import band_layout, band_matvec, condense_band, condense_vector, constrain_band, expand_step, new_band
 from ..loads import DistributedForce, EndForce, EndTorque, PointForce, TwistingMoment
 from ..scene import COUNTER_NAMES, evaluate, make_plan
 
@@ -48,6 +48,8 @@ class System:
     grad: np.ndarray
     fext: np.ndarray
     ab: np.ndarray
+    links: object = NO_LINKS   # the end supports' dependents (constraints.Links): q = c + T y
+    mass_full: np.ndarray = None   # lumped mass before condensation (``mass`` is T^T M T, lumped)
 
     @property
     def n_dof(self):
@@ -60,10 +62,22 @@ class System:
 
 def axial_penalty(rod, options):
     """Per-edge axial stiffness k_j: EA / l_j for an extensible rod, the augmented-Lagrangian penalty
-    ``c A1 / l_j^3`` for an inextensible one."""
+    ``c A1 / l_j^3`` for an inextensible one.
+
+    The end edges of an open extensible rod count half: only their inner half lies in [0, L] (their midpoints
+    are the end cross-sections), so the stretch energy is the midpoint rule for the integral of EA/2 eps^2 over
+    [0, L], like bending and twisting. With it a uniform bar pulled by an end force P (half on each node of the
+    end edge) has the strain P/EA in every edge, end edges included, and its ends' centres move apart by exactly
+    P L / EA (issue 13: with full-weight end edges the end edges carried P/2 and the bar stretched 1% short at
+    n = 50)."""
     if rod.inextensible:
         return options.inextensible_penalty * rod.A1 / rod.l_bar ** 3
-    return rod.EA / rod.l_bar
+    k = np.broadcast_to(np.asarray(rod.EA, float), rod.l_bar.shape) / rod.l_bar
+    if not rod.closed:
+        k = k.copy()
+        k[0] *= 0.5
+        k[-1] *= 0.5
+    return k
 
 
 def rotational_inertia(rod):
@@ -122,7 +136,7 @@ def build_system(scene, options):
     rod = scene.rod
     k = axial_penalty(rod, options)
     plan = make_plan(scene, k)
-    fixed = fixed_dofs(rod, scene.constraints)
+    fixed, links = build_links(rod, scene.constraints)
     kl, ku, perm = band_layout(rod.n_nodes, rod.closed)
     n = rod.n_dof
     L = rod.length
@@ -140,9 +154,61 @@ def build_system(scene, options):
     mass[4 * np.arange(rod.n_edges) + 3] = rotational_inertia(rod) * rod.l_bar
     F_app, M_app = applied_scales(scene)
     system = System(scene, rod, plan, fixed, ~fixed, kl, ku, perm, plan.k_stretch, weights, is_theta, mass, F_app,
-                    M_app, np.zeros(n), np.zeros(n), new_band(n, kl, ku))
+                    M_app, np.zeros(n), np.zeros(n), new_band(n, kl, ku), links, mass.copy())
+    system.mass = condensed_mass(system)
     system.k_initial = plan.k_stretch.copy()
     return system
+
+
+def condensed_mass(system):
+    """The lumped mass in the free variables y of q = c + T y: diag(T^T M T), i.e. M_m + sum_d a_dm^2 M_d (a
+    master of a hinge carries its dependent's mass too); 1 on held DOFs."""
+    m = system.mass_full.copy()
+    lk = system.links
+    np.add.at(m, lk.tri_master, lk.tri_coef ** 2 * system.mass_full[lk.tri_dep])
+    return m
+
+
+def update_links(system, state):
+    """Recompute the end supports' links (and the held mask and condensed mass) at the prepared ``state``
+    (whose targets are applied): a clamp holds its end edge along its current direction."""
+    fixed, links = build_links(system.rod, system.scene.constraints, state)
+    system.fixed = fixed
+    system.free = ~fixed
+    system.links = links
+    system.mass = condensed_mass(system)
+
+
+def condense_system_band(system, ab):
+    """ab <- T^T ab T for the end supports' change of variables (rows and columns of held DOFs untouched):
+    the full-space Jacobian mapped to the free variables, in the same band storage. For the stability analysis
+    and the solvers; with no end supports it does nothing (the plain ``fixed`` mask is all there is)."""
+    lk = system.links
+    if lk.tri_dep.size:
+        condense_band(ab, system.kl, system.ku, system.perm, lk.tri_dep, lk.tri_master, lk.tri_coef)
+    return ab
+
+
+def constrain_system(system, ab, diag):
+    """ab <- T^T ab T with the rows and columns of held DOFs replaced by ``diag`` times identity."""
+    condense_system_band(system, ab)
+    constrain_band(ab, system.kl, system.ku, system.perm, system.fixed, diag)
+    return ab
+
+
+def condense_forces(system, r):
+    """r <- T^T r on the free variables, zero on held DOFs (in place): a generalized force on the free space."""
+    lk = system.links
+    condense_vector(r, lk.tri_dep, lk.tri_master, lk.tri_coef, system.fixed)
+    return r
+
+
+def expand(system, delta):
+    """delta <- T delta (in place): a step in the free variables (zero on held DOFs) as a step of q."""
+    lk = system.links
+    if lk.tri_dep.size:
+        expand_step(delta, lk.tri_dep, lk.tri_master, lk.tri_coef)
+    return delta
 
 
 def evaluate_system(system, state, order):
@@ -170,10 +236,8 @@ def load_scales(system, state):
 
 
 def residual_vector(system):
-    """R = f_ext - dE/dq on the free DOFs (zero on fixed ones), from the last evaluation."""
-    R = system.fext - system.grad
-    R[system.fixed] = 0.0
-    return R
+    """R = T^T (f_ext - dE/dq) on the free DOFs (zero on held ones), from the last evaluation."""
+    return condense_forces(system, system.fext - system.grad)
 
 
 def residual_norm(system, R, scales, per_length=False):
@@ -190,7 +254,8 @@ def floor_forces(system, state):
     coordinate, zero on fixed DOFs. Needs ``system.ab`` evaluated at ``state``."""
     out = np.empty(system.n_dof)
     band_matvec(system.ab, system.kl, system.ku, system.perm, state.q, out, True)
-    out[system.fixed] = 0.0
+    lk = system.links
+    condense_vector(out, lk.tri_dep, lk.tri_master, np.abs(lk.tri_coef), system.fixed)
     return np.finfo(float).eps * out
 
 
@@ -206,7 +271,7 @@ def newton_error_estimate(system, state):
     (max norm over node positions and, times the rod length, edge angles): an estimate of the error left,
     dominated by the slowest modes. Rigid-body
     and other symmetry modes of an unconstrained rod are projected out (they carry no error)."""
-    from ..linalg import add_diagonal, band_solve, constrain_band
+    from ..linalg import add_diagonal, band_solve
     from .stability import symmetry_modes
 
     evaluate_system(system, state, 2)
@@ -219,10 +284,11 @@ def newton_error_estimate(system, state):
     diag = np.abs(ab[system.kl + system.ku, :][system.perm])
     diag[diag == 0] = 1.0
     add_diagonal(ab, system.kl, system.ku, system.perm, diag, 1e-14)   # regularises the symmetry modes
-    constrain_band(ab, system.kl, system.ku, system.perm, system.fixed, 1.0)
+    constrain_system(system, ab, 1.0)
     delta, info = band_solve(ab, system.kl, system.ku, system.perm, R)
     if info != 0 or not np.all(np.isfinite(delta)):
         return np.inf
+    expand(system, delta)
     if V.shape[1]:
         delta = delta - Q @ (Q.T @ delta)
     # displacement and rotation (times the rod length) from the rest shape, against the same of the correction
@@ -374,6 +440,11 @@ def prepare_state(system, state):
         target = np.arctan2(m1 @ d2, m1 @ d1)
         current = work.q[4 * j + 3]
         work.q[4 * j + 3] = current + (target - current + np.pi) % (2 * np.pi) - np.pi
+    update_links(system, work)
+    if system.links.dep.size:
+        enforce_links(work.q, system.links)
+        base = work.copy()
+        transport(system, base, work.q, work)
     return work
 
 

@@ -161,6 +161,8 @@ def scenario_main(name, description, parameters, run, n_default=100, n_min=2, ar
         "compile_s": compile_s,
         "min_eigenvalue": main.min_eigenvalue if main else None,
         "stable": main.stable if main else None,
+        # every support's reaction (force, moment about the end cross-section), lab frame, of the last solve
+        "reactions": [{k: v for k, v in r.items()} for r in main.reactions] if main else [],
     }
     record.update(out)
     if args.rrd:

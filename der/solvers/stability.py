@@ -17,7 +17,7 @@ shift-invert mode around zero on the sparse matrix, the symmetry modes shifted a
 import numpy as np
 
 from ..linalg import band_negative_pivots, band_to_sparse
-from .system import evaluate_system
+from .system import condense_system_band, evaluate_system
 
 DENSE_MAX_DOFS = 300   # dense eigen-solver only for small systems (never above 500 edges)
 
@@ -60,6 +60,7 @@ def stability(system, result, n_eigenvalues=6):
 
     state = result.state
     evaluate_system(system, state, 2)
+    condense_system_band(system, system.ab)   # end supports: T^T K T on their free variables (q = c + T y)
     K = band_to_sparse(system.ab, system.kl, system.ku, system.perm).tocsr()
     free = system.free.copy()
     rod = system.rod

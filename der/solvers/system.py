@@ -358,8 +358,57 @@ def final_result(system, state, status, **fields):
         status = "nonfinite"
         fields["message"] = f"the force scale became non-finite ({scales[0]:.3g}, {scales[1]:.3g}); no verdict"
     per_length = residual_norm(system, residual_vector(system), scales, per_length=True)
+    fields.setdefault("reactions", support_reactions(system, state))
     return SolveResult(state=state, converged=status in CONVERGED_STATUSES, status=status, load_scale=float(scales[0]),
                        energy=energy_terms(system, state), residual_per_length=per_length, **fields)
+
+
+def support_reactions(system, state):
+    """The reaction of every constraint at ``state``, from the last order >= 1 evaluation (``system.grad`` and
+    ``system.fext`` at ``state``): a list of dicts, one per constraint in the scene's order, with
+
+    ``support`` ("clamp", "hinge", "roller", "pin", "fix_theta"), ``end`` ("start"/"end") or ``node`` or
+    ``edge``, ``at`` (the point the moment is taken about: the end cross-section's centre, the pinned node, the
+    edge midpoint), ``force`` and ``moment`` (3-vectors, lab frame: what the support exerts ON the rod).
+
+    A support's reaction is the generalized force its constraint adds so that the rod is in equilibrium,
+    ``grad E - f_ext`` on the entries it acts on (the two nodes of the end edge and, for a clamp, the end angle
+    theta, whose generalized force is the moment about the end tangent). Its moment about ``at`` is
+    ``sum (x_k - at) x f_k + f_theta t``. Because the elastic energy does not change under rigid motions, the
+    reactions and the loads balance exactly (to the residual), forces and moments; and since ``at`` is the
+    end cross-section itself the moment needs no transport (second order like the solution). Two constraints
+    on the same node both report the force on it."""
+    from ..constraints import Clamp, EndSupport, FixTheta, Pin, end_centre, support_dofs
+
+    rod = system.rod
+    f = system.grad - system.fext
+    x = state.positions
+    out = []
+    for c in system.scene.constraints:
+        nodes, edge = support_dofs(rod, c)
+        if isinstance(c, (Clamp, EndSupport)):
+            at = end_centre(x, rod, c.end)
+            entry = {"support": "clamp" if isinstance(c, Clamp) else c.kind, "end": c.end}
+        elif isinstance(c, Pin):
+            at = x[nodes[0]].copy()
+            entry = {"support": "pin", "node": int(nodes[0])}
+        elif isinstance(c, FixTheta):
+            a, b = rod.edge_nodes[edge]
+            at = 0.5 * (x[a] + x[b])
+            entry = {"support": "fix_theta", "edge": int(edge)}
+        else:
+            continue
+        force = np.zeros(3)
+        moment = np.zeros(3)
+        for k in nodes:
+            fk = f[4 * k:4 * k + 3]
+            force += fk
+            moment += np.cross(x[k] - at, fk)
+        if edge is not None:
+            moment += f[4 * edge + 3] * state.tangents[edge]
+        entry.update(at=at, force=force, moment=moment)
+        out.append(entry)
+    return out
 
 
 def max_strain(system, state):

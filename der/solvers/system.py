@@ -25,7 +25,7 @@ from ..diagnostics import _edge_forces
 from ..energies.stretch import elongations
 from ..geometry import edge_frames, transport_frames
 from ..linalg import band_layout, band_matvec, condense_band, condense_vector, constrain_band, expand_step, new_band
-from ..loads import DistributedForce, EndForce, EndTorque, PointForce, TwistingMoment
+from ..loads import DistributedForce, EndForce, EndTorque, FollowerForce, PointForce, PointTorque, TwistingMoment
 from ..scene import COUNTER_NAMES, evaluate, make_plan
 
 
@@ -120,8 +120,10 @@ def applied_scales(scene):
             f = safe_norm(load.force)
         elif isinstance(load, DistributedForce):
             f = safe_norm(load.density) * L
-        elif isinstance(load, EndTorque):
+        elif isinstance(load, (EndTorque, PointTorque)):
             m = abs(float(load.torque)) if load.follower else safe_norm(load.torque)
+        elif isinstance(load, FollowerForce):
+            f = safe_norm(load.density) * L
         elif isinstance(load, TwistingMoment):
             m = abs(load.density) * L
         if not (np.isfinite(f) and np.isfinite(m) and np.isfinite(f * L) and np.isfinite(m / L)):
@@ -542,7 +544,7 @@ def check_equilibrium_exists(system, state):
             # the total the rod receives: the density times the length its nodes stand for (make_plan's lumping)
             f = np.asarray(load.density, float) * float(rod.node_weights().sum())
         else:
-            if isinstance(load, EndTorque) and not load.follower:
+            if isinstance(load, (EndTorque, PointTorque)) and not load.follower:
                 net_torque += np.asarray(load.torque, float)
                 torque_total += safe_norm(load.torque)
             else:

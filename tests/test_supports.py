@@ -325,3 +325,20 @@ def test_bad_supports_are_refused_before_any_work():
     ring = der.rod_from_shape(der.shapes.ring(1.0, 12), 1.0, 1.0)
     with pytest.raises(ValueError, match="a closed ring has no ends"):
         der.Scene(ring, constraints=[der.hinge("start")])
+
+
+def test_no_equilibrium_is_refused_with_supports_on_skew_lines():
+    # a roller on a line off the coordinate axes cannot react along that line: a net force along it is refused
+    rod = beam(10)
+    s = (1.0, 1.0, 0.0)
+    scene = der.Scene(rod, loads=[der.end_force([1e-3, 1e-3, 0.0])],
+                      constraints=[der.hinge("start", slide=s), der.roller("end", along=s)])
+    with pytest.raises(ValueError, match=r"cannot react along \(0.707107, 0.707107, 0\)"):
+        der.solve(scene)
+    # a force normal to that line is balanced (no false refusal): the beam bends
+    ok = der.Scene(rod, loads=[der.point_force(5, [1e-3, -1e-3, 0.0])],
+                   constraints=[der.hinge("start", slide=s), der.roller("end", along=s), der.fix_theta(0)])
+    assert solve(ok, stability=False).converged
+    # a dead torque on a rod held by one hinge turns it about the hinge: refused
+    with pytest.raises(ValueError, match="free to rotate about"):
+        der.solve(der.Scene(rod, loads=[der.end_torque([0, 0, 1e-3])], constraints=[der.hinge("start")]))

@@ -555,10 +555,10 @@ def check_equilibrium_exists(system, state):
         if np.any(f != 0.0):
             conservative_torques_only = False        # forces have a moment that depends on the configuration
     what = "an unconstrained rod" if not fixed.any() else None
-    free_axes = [a for a in range(3) if not fixed.reshape(-1, 4)[:, a].any()]
-    bad = [a for a in free_axes if abs(net_force[a]) > 1e-12 * total]
+    bad = [u for u in free_translations(system) if abs(u @ net_force) > 1e-12 * total]
     if bad:
-        where = what or f"a rod whose constraints cannot react along {', '.join('xyz'[a] for a in bad)}"
+        names = ["xyz"[int(np.argmax(np.abs(u)))] if np.abs(u).max() > 1 - 1e-12 else _fmt_vector(u) for u in bad]
+        where = what or f"a rod whose constraints cannot react along {', '.join(names)}"
         raise ValueError(f"net applied force {_fmt_vector(net_force)} on {where}: no static equilibrium exists "
                          "(add a clamp or pin that can react, or balance the loads)")
     if conservative_torques_only and torque_total > 0.0:
@@ -570,13 +570,58 @@ def check_equilibrium_exists(system, state):
                              "it: no static equilibrium exists (add a clamp, or balance the torques)")
 
 
+def _violation(system, v):
+    """How far the motion ``v`` (n_dof) breaks the constraints: its entries on plainly held DOFs and, on the end
+    supports' dependents, v_d - sum a v_m (a motion the supports allow has q = c + T y, so v = T y)."""
+    lk = system.links
+    held = system.fixed.copy()
+    if not system.rod.closed:
+        held[4 * system.rod.n_nodes - 1] = False     # the dummy slot is not a constraint
+    held[lk.dep] = False
+    linked = v[lk.dep].astype(float)
+    pos = {int(d): i for i, d in enumerate(lk.dep)}
+    for d, m, a in zip(lk.tri_dep, lk.tri_master, lk.tri_coef):
+        linked[pos[int(d)]] -= a * v[m]
+    return np.concatenate([v[held], linked])
+
+
+def free_translations(system):
+    """Orthonormal rows (k, 3): the rigid translations the constraints leave free (for a roller along a line
+    not on a coordinate axis, that line's direction)."""
+    rod = system.rod
+    C = []
+    for a in range(3):
+        v = np.zeros(rod.n_dof)
+        v.reshape(-1, 4)[:, a] = 1.0
+        if not rod.closed:
+            v[4 * rod.n_nodes - 1] = 0.0
+        C.append(_violation(system, v))
+    C = np.array(C).T
+    if C.size == 0:
+        return np.eye(3)
+    _, sv, vt = np.linalg.svd(C)
+    rank = int(np.sum(sv > 1e-12 * max(sv.max(initial=0.0), 1.0)))
+    U = vt[rank:]
+    U[np.abs(U) < 1e-12] = 0.0
+    return U * np.where(U[np.arange(len(U)), np.argmax(np.abs(U), axis=1)] < 0, -1.0, 1.0)[:, None]
+
+
 def _rotation_is_free(system, state, fixed, a):
-    """Whether a rigid rotation about coordinate axis ``a`` -- about the one pinned node, or the centroid -- moves
-    no fixed DOF (the centre used by ``stability.symmetry_modes``)."""
+    """Whether a rigid rotation about coordinate axis ``a`` -- about the one pinned node or the one end support's
+    centre, or the centroid -- moves no held DOF and keeps the end supports' links (the centre used by
+    ``stability.symmetry_modes``)."""
+    from ..constraints import END_SUPPORTS, end_centre
+
     rod = system.rod
     x = state.positions
-    pinned = [k for k in range(rod.n_nodes) if fixed[4 * k:4 * k + 3].all()]
-    centre = x[pinned[0]] if len(pinned) == 1 else x.mean(axis=0)
+    supports = [c for c in system.scene.constraints if isinstance(c, END_SUPPORTS)]
+    held = fixed.copy()
+    held[system.links.dep] = False
+    pinned = [k for k in range(rod.n_nodes) if held[4 * k:4 * k + 3].all()]
+    if len(supports) == 1 and not pinned:
+        centre = end_centre(x, rod, supports[0].end)
+    else:
+        centre = x[pinned[0]] if len(pinned) == 1 else x.mean(axis=0)
     w = np.zeros(3)
     w[a] = 1.0
     v = np.zeros(rod.n_dof)
@@ -584,7 +629,7 @@ def _rotation_is_free(system, state, fixed, a):
     v[4 * np.arange(rod.n_edges) + 3] = state.tangents @ w
     if not rod.closed:
         v[4 * rod.n_nodes - 1] = 0.0
-    return bool(np.abs(v[fixed]).max(initial=0.0) < 1e-12 * np.abs(v).max())
+    return bool(np.abs(_violation(system, v)).max(initial=0.0) < 1e-12 * np.abs(v).max())
 
 
 # constraint tension against the larger of the bending scale A1/L^2 and the applied load scale above which an

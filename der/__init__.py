@@ -1,9 +1,9 @@
 """der: discrete elastic rods with natural curvature and twist (Drozdov & Rabin), compiled with numba.
 
 Build a rod from a shape (``rod_from_shape(shapes.helix(...), A1, A2)``), put it in a ``Scene`` with loads
-(``point_force``, ``end_force``, ``distributed_force``, ``end_torque``, ``twisting_moment``,
-``point_torque``, ``follower_force``) and constraints
-(``clamp``, ``hinge``, ``roller``, ``pin``, ``fix_theta``), relax it with ``solve``; read the paper's variables with ``diagnostics``.
+(``point_force``, ``end_force``, ``distributed_force``, ``end_torque``, ``twisting_moment``, ``point_torque``,
+``follower_force``) and constraints (``clamp``, ``hinge``, ``roller``, ``pin``, ``fix_theta``), relax it with
+``solve``; read the paper's variables with ``diagnostics``.
 Every public name has a docstring with units, sign conventions and an example: ``help(der.end_torque)``.
 
 Example

@@ -103,6 +103,15 @@ def _run_kernels():
         # certification) compiles too
         solve(scene, solver=solver, tol=1e-300, raise_on_failure=False, stability=False, max_steps=20000,
               max_iterations=60, progress=False)
+    # end supports (their banded change of variables), point torques and follower forces (issue 13)
+    from .constraints import hinge
+    from .loads import follower_force, point_torque
+
+    supported = Scene(rod, loads=[follower_force((1e-4, 0.0)), point_torque(2, [0, 1e-4, 0])],
+                      constraints=[clamp("start"), hinge("end")])
+    for solver in ("implicit", "explicit"):
+        solve(supported, solver=solver, tol=1e-6, raise_on_failure=False, stability=True, max_steps=2000,
+              progress=False)
     ring = rod_from_shape(shapes.ring(1.0, 5), 1.0, 1.5, EA=100.0)
     res = solve(Scene(ring, loads=[twisting_moment(1e-3)]), tol=1e-6, raise_on_failure=False, progress=False)
     dg.profile(ring, res.state)

@@ -163,6 +163,10 @@ def test_reactions_balance_the_loads_forces_and_moments(support):
     res = solve(scene, stability=False, tol=1e-11)
     F, M = _statics(res, scene)
     assert np.abs(F).max() < 1e-9 and np.abs(M).max() < 1e-9
+    # the diagnostics function gives the same from the state alone
+    for a, b in zip(der.diagnostics.reactions(scene, res.state), res.reactions):
+        assert a["support"] == b["support"] and np.abs(a["force"] - b["force"]).max() < 1e-12
+        assert np.abs(a["moment"] - b["moment"]).max() < 1e-12
     # a support reacts only where it holds: not along a roller's plane or a sliding clamp's direction
     r = res.reactions[1]["force"]
     if support == "roller":

@@ -27,8 +27,8 @@ import numpy as np
 from ..linalg import add_diagonal, band_solve
 from .system import (
     FLOOR_FACTOR, INTERRUPTS, constrain_system, constraint_residual, energy_terms, evaluate_system, expand,
-    final_result, floor_forces, floor_verdict, is_interrupt, load_scales, max_strain, multiplier_update, residual_floor, residual_norm,
-    residual_vector, transport,
+    final_result, floor_forces, floor_verdict, is_interrupt, load_scales, max_strain, multiplier_update,
+    residual_floor, residual_norm, residual_vector, transport,
 )
 
 STALL_ITERATIONS = 6

@@ -346,3 +346,23 @@ def test_no_equilibrium_is_refused_with_supports_on_skew_lines():
     # a dead torque on a rod held by one hinge turns it about the hinge: refused
     with pytest.raises(ValueError, match="free to rotate about"):
         der.solve(der.Scene(rod, loads=[der.end_torque([0, 0, 1e-3])], constraints=[der.hinge("start")]))
+
+
+def test_scenario_json_carries_every_supports_reaction(capsys):
+    import importlib.util
+    import json
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scenarios" / "straight_twist.py"
+    spec = importlib.util.spec_from_file_location("straight_twist", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    from der.cli import scenario_main
+
+    assert scenario_main("straight_twist", "", mod.PARAMETERS, mod.run, argv=["--n", "20", "--json"]) == 0
+    record = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    (clamp,) = record["reactions"]
+    assert clamp["support"] == "clamp" and clamp["end"] == "start"
+    # the clamp holds the end torque: its moment about the tangent balances it
+    assert clamp["moment"][2] == pytest.approx(-record["params"]["T"], rel=1e-9)
+    assert np.abs(clamp["force"]).max() < 1e-12

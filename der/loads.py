@@ -73,8 +73,8 @@ class PointTorque:
     """A torque on the material frame of edge ``edge`` (any edge, interior ones included).
 
     ``follower=False``: a dead torque, ``torque`` a fixed 3-vector (force * length).
-    ``follower=True``: ``torque`` a scalar T about the edge's current tangent (positive over-twists).
-    Made by ``der.point_torque``."""
+    ``follower=True``: ``torque`` a scalar T about the edge's current tangent (positive over-twists), or a
+    3-vector of components along the edge's current material frame (m1, m2, t). Made by ``der.point_torque``."""
     edge: int
     torque: object
     follower: bool = False
@@ -263,10 +263,12 @@ def point_torque(edge, torque, follower=False):
     edge : int
         Edge index, 0 ... n_edges - 1 (negative counts from the end). Edge j's cross-section is at its midpoint,
         arc length ``Rod.xi_edges()[j]``; the end edges' are the end cross-sections (``der.end_torque``).
-    torque : 3-vector (dead) or float (follower)
+    torque : 3-vector (dead), float or 3-vector (follower)
         ``follower=False``: a fixed vector in the global frame (force * length); its component along the edge
         tangent twists, the rest bends. ``follower=True``: a scalar T, the moment T t about the edge's CURRENT
-        tangent t (right-handed about the direction of increasing arc length).
+        tangent t (right-handed about the direction of increasing arc length); or a 3-vector (T1, T2, Tt), the
+        moment T1 m1 + T2 m2 + Tt t in the edge's current material frame (it turns with the cross-section; its
+        load stiffness is in the Newton matrix).
     follower : bool
 
     Returns
@@ -283,9 +285,12 @@ def point_torque(edge, torque, follower=False):
         raise TypeError(f"der.point_torque: follower must be True or False; got {follower!r}")
     edge = validate.integer(edge, "der.point_torque: edge", "an integer edge index")
     if follower:
+        if np.ndim(torque) == 1:
+            return PointTorque(edge, tuple(validate.vector3(
+                torque, "der.point_torque: torque (follower=True: components along m1, m2, t)")), True)
         if np.ndim(torque) != 0 and not isinstance(torque, str):
-            raise ValueError(f"der.point_torque: a follower torque (follower=True) is a scalar T, the moment about "
-                             f"the current edge tangent; got torque={torque!r}")
+            raise ValueError(f"der.point_torque: a follower torque (follower=True) is a scalar T (about the current "
+                             f"edge tangent) or a 3-vector in the material frame (m1, m2, t); got torque={torque!r}")
         return PointTorque(edge, validate.finite_number(torque, "der.point_torque: torque (follower=True)"), True)
     if np.ndim(torque) == 0 and not isinstance(torque, (str, type(None))):
         raise ValueError(f"der.point_torque: a dead torque (follower=False) is a 3-vector [Tx, Ty, Tz] in the global "
@@ -457,6 +462,52 @@ def add_follower_forces(ed, edge_nodes, q, density, w_first, w_second, order, fe
                 K[3 + r, 3 + c] = -wb * D[r, c]
             K[r, 6] = -wa * g[r]
             K[3 + r, 6] = -wb * g[r]
+        edge_dofs(edge_nodes, j, dofs)
+        for r in range(6):
+            full[r] = dofs[r]
+        full[6] = 4 * j + 3
+        scatter_band(ab, kl, ku, perm, full, K, 1.0)
+
+
+@njit(cache=True)
+def add_follower_torques(ed, edge_nodes, edges, torques, order, fext, ab, kl, ku, perm):
+    """Follower torques ``torques[i]`` = (T1, T2, Tt), components along the current material frame (m1, m2, t)
+    of edge ``edges[i]``: Tt on theta and the couple +-u / |e| on the edge's nodes, u = T x t = T2 m1 - T1 m2.
+    With order >= 2 also the load stiffness -d fext/dq: d(u/|e|)/de = -(t u^T + u t^T) / |e|^2 (the material
+    directors move with the edge as dm_i/de = -t m_i^T / |e|), d(u/|e|)/dtheta = (T1 m1 + T2 m2) / |e|.
+    ``ed`` is an ``edge_frames`` array."""
+    dofs = np.empty(6, dtype=np.int64)
+    full = np.empty(7, dtype=np.int64)
+    K = np.zeros((7, 7))
+    for i in range(edges.shape[0]):
+        j = edges[i]
+        T1, T2, Tt = torques[i, 0], torques[i, 1], torques[i, 2]
+        t = ed[j, 0:3]
+        le = ed[j, 3]
+        m1 = ed[j, 4:7]
+        m2 = ed[j, 7:10]
+        u = T2 * m1 - T1 * m2
+        a = 4 * edge_nodes[j, 0]
+        b = 4 * edge_nodes[j, 1]
+        fext[4 * j + 3] += Tt
+        for k in range(3):
+            fext[b + k] += u[k] / le
+            fext[a + k] -= u[k] / le
+        if order < 2:
+            continue
+        g = (T1 * m1 + T2 * m2) / le
+        for r in range(7):
+            for c in range(7):
+                K[r, c] = 0.0
+        for r in range(3):
+            for c in range(3):
+                D = -(t[r] * u[c] + u[r] * t[c]) / (le * le)
+                K[3 + r, 3 + c] = -D
+                K[3 + r, c] = D
+                K[r, 3 + c] = D
+                K[r, c] = -D
+            K[3 + r, 6] = -g[r]
+            K[r, 6] = g[r]
         edge_dofs(edge_nodes, j, dofs)
         for r in range(6):
             full[r] = dofs[r]

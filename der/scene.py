@@ -18,14 +18,14 @@ from .energies.twist import twist_energy, twist_gradient, twist_hessian
 from .geometry import add_transport_jacobian, edge_frames
 from .loads import (
     DistributedForce, EndForce, EndTorque, FollowerForce, PointForce, PointTorque, TwistingMoment, add_dead_torques,
-    add_follower_forces, add_nodal_forces, add_theta_moments,
+    add_follower_forces, add_follower_torques, add_nodal_forces, add_theta_moments,
 )
 from .rod import Rod
 
 ENERGY_TERMS = ("stretch", "bend", "twist")
 # slots of plan.counters
 COUNTER_NAMES = ("stretch", "bend", "twist", "transport_jacobian", "nodal_forces", "theta_moments", "dead_torques",
-                 "follower_forces")
+                 "follower_forces", "follower_torques")
 
 
 @dataclass(frozen=True, eq=False)
@@ -110,7 +110,7 @@ def _check_load(rod, load):
         if not -rod.n_edges <= edge < rod.n_edges:
             raise ValueError(f"point torque on edge {edge}: out of range for {rod.n_edges} edges "
                              f"(allowed: {-rod.n_edges} ... {rod.n_edges - 1})")
-        if load.follower:
+        if load.follower and np.ndim(load.torque) == 0:
             validate.finite_number(load.torque, "der.point_torque: torque (follower=True: a scalar)")
         else:
             validate.vector3(load.torque, "der.point_torque: torque")
@@ -130,6 +130,7 @@ Plan = namedtuple("Plan", [
     "has_dead_torques", "torque_edges", "torque_vectors",
     "counters",
     "has_follower", "follower_density", "follower_first", "follower_second",
+    "has_follower_torques", "follower_torque_edges", "follower_torque_vectors",
 ])
 
 
@@ -142,6 +143,7 @@ def make_plan(scene, k_stretch):
     t_edges, t_vecs = [], []
     follower = np.zeros(3)
     has_follower = False
+    ft_edges, ft_vecs = [], []
     node_len = rod.node_weights()
     for load in scene.loads:
         if isinstance(load, PointForce):
@@ -168,7 +170,10 @@ def make_plan(scene, k_stretch):
             has_theta = True
         elif isinstance(load, PointTorque):
             j = load.edge % rod.n_edges
-            if load.follower:
+            if load.follower and np.ndim(load.torque) == 1:
+                ft_edges.append(j)
+                ft_vecs.append(load.torque)
+            elif load.follower:
                 theta[j] += load.torque
                 has_theta = True
             else:
@@ -194,6 +199,7 @@ def make_plan(scene, k_stretch):
         len(t_edges) > 0, np.array(t_edges, dtype=np.int64), np.array(t_vecs, dtype=float).reshape(-1, 3),
         np.zeros(len(COUNTER_NAMES), dtype=np.int64),
         has_follower, follower, w_first, w_second,
+        len(ft_edges) > 0, np.array(ft_edges, dtype=np.int64), np.array(ft_vecs, dtype=float).reshape(-1, 3),
     )
 
 
@@ -262,4 +268,8 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
         plan.counters[7] += 1
         add_follower_forces(edge_frames(q, plan.edge_nodes, d1), plan.edge_nodes, q, plan.follower_density,
                             plan.follower_first, plan.follower_second, order, fext, ab, kl, ku, perm)
+    if plan.has_follower_torques:
+        plan.counters[8] += 1
+        add_follower_torques(edge_frames(q, plan.edge_nodes, d1), plan.edge_nodes, plan.follower_torque_edges,
+                             plan.follower_torque_vectors, order, fext, ab, kl, ku, perm)
     return energy

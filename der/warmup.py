@@ -107,7 +107,8 @@ def _run_kernels():
     from .constraints import hinge
     from .loads import follower_force, point_torque
 
-    supported = Scene(rod, loads=[follower_force((1e-4, 0.0)), point_torque(2, [0, 1e-4, 0])],
+    supported = Scene(rod, loads=[follower_force((1e-4, 0.0)), point_torque(2, [0, 1e-4, 0]),
+                                  point_torque(3, [1e-4, 0, 0], follower=True)],
                       constraints=[clamp("start"), hinge("end")])
     for solver in ("implicit", "explicit"):
         solve(supported, solver=solver, tol=1e-6, raise_on_failure=False, stability=True, max_steps=2000,

@@ -243,7 +243,9 @@ def test_condensed_band_is_T_transpose_K_T(support):
 # -- loads: point torques and follower forces, stiffness by finite differences --------------------------------
 
 @pytest.mark.parametrize("load", [der.follower_force((0.3, -0.2, 0.1)), der.follower_force((0.0, 0.0, 0.5)),
-                                  der.point_torque(4, [0.2, -0.1, 0.3])], ids=["follower", "tangential", "dead"])
+                                  der.point_torque(4, [0.2, -0.1, 0.3]),
+                                  der.point_torque(4, [0.2, -0.1, 0.3], follower=True)],
+                         ids=["follower", "tangential", "dead", "follower_torque"])
 def test_load_stiffness_matches_finite_differences(load):
     rod = der.rod_from_shape(der.shapes.helix(kappa0=1.5, omega0=0.7, turns=0.4, n=8), A1=1.0, A2=1.3, EA=50.0)
     scene = der.Scene(rod, energies=(), loads=[load])
@@ -366,3 +368,19 @@ def test_scenario_json_carries_every_supports_reaction(capsys):
     # the clamp holds the end torque: its moment about the tangent balances it
     assert clamp["moment"][2] == pytest.approx(-record["params"]["T"], rel=1e-9)
     assert np.abs(clamp["force"]).max() < 1e-12
+
+
+def test_follower_end_moment_in_the_material_frame_bends_a_cantilever_into_a_circle():
+    # a moment M along m2 of the last edge, turning with it: uniform curvature M / A1, the end on a circle
+    M = np.pi / 2                     # a quarter circle
+    chords = []
+    for n in (20, 40):
+        rod = beam(n, EA=None)
+        res = solve(der.Scene(rod, loads=[der.point_torque(-1, [0.0, M, 0.0], follower=True)],
+                              constraints=[der.clamp("start")]), stability=False, tol=1e-10)
+        tip = centre(res.state.positions, "end")
+        assert abs(tip[1]) < 1e-10                        # m2 = t x m1 = -y: bending in the x-z plane
+        chords.append(np.linalg.norm(tip))
+    R = A1 / M
+    errors = [abs(c / (2 * R * np.sin(L / (2 * R))) - 1) for c in chords]
+    assert errors[1] < 1e-3 and order(errors) > 1.9

@@ -205,7 +205,8 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
     last_good = state.copy()
     evaluate_system(system, state, 1)
     e_total, work_done = None, 0.0
-    conservative = not (system.plan.has_theta or system.plan.has_dead_torques or system.plan.has_follower)
+    conservative = not (system.plan.has_theta or system.plan.has_dead_torques or system.plan.has_follower
+                        or system.plan.has_follower_torques)
     guard = 64 * np.finfo(float).eps if conservative else 1e-6
     check = 0
     best, since_best = np.inf, 0

@@ -121,7 +121,7 @@ def applied_scales(scene):
         elif isinstance(load, DistributedForce):
             f = safe_norm(load.density) * L
         elif isinstance(load, (EndTorque, PointTorque)):
-            m = abs(float(load.torque)) if load.follower else safe_norm(load.torque)
+            m = abs(float(load.torque)) if np.ndim(load.torque) == 0 else safe_norm(load.torque)
         elif isinstance(load, FollowerForce):
             f = safe_norm(load.density) * L
         elif isinstance(load, TwistingMoment):

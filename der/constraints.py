@@ -534,8 +534,8 @@ def enforce_links(q, links):
 
 
 def support_dofs(rod, c):
-    """The state entries a constraint acts on (where its reaction is read), and the point about which its
-    reaction moment is taken: (dofs, node indices, theta edge or None)."""
+    """Where a constraint's reaction is read: (the nodes whose position entries it acts on, the edge whose
+    angle theta it holds or None)."""
     if isinstance(c, END_SUPPORTS):
         k_out, k_in, j = end_index(rod, c.end)
         return (k_out, k_in), (j if isinstance(c, Clamp) else None)

@@ -344,6 +344,8 @@ def scenario_main(name, description, parameters, run, n_default=100, n_min=2, ar
         "min_eigenvalue": main.min_eigenvalue if main else None,
         "stable": main.stable if main else None,
         "check_passed": check_failed is None,
+        # every support's reaction (force, moment about the end cross-section), lab frame, of the last solve
+        "reactions": [{k: v for k, v in r.items()} for r in main.reactions] if main else [],
     }
     if check_failed is not None:
         record["check_failed"] = check_failed

@@ -110,6 +110,17 @@ def _run_kernels():
         # certification) compiles too
         solve(scene, solver=solver, tol=1e-300, raise_on_failure=False, stability=False, max_steps=20000,
               max_iterations=60, progress=False)
+    # end supports (their banded change of variables), point torques and follower forces (issue 13)
+    from .constraints import hinge
+    from .loads import follower_force, point_torque
+
+    # (an extensible rod: the explicit solver's length projection does not take coupled support links)
+    supported = Scene(rod.with_stiffness(EA=1e4), loads=[follower_force((1e-4, 0.0)), point_torque(2, [0, 1e-4, 0]),
+                                  point_torque(3, [1e-4, 0, 0], follower=True)],
+                      constraints=[clamp("start"), hinge("end")])
+    for solver in ("implicit", "explicit"):
+        solve(supported, solver=solver, tol=1e-6, raise_on_failure=False, stability=True, max_steps=2000,
+              progress=False)
     ring = rod_from_shape(shapes.ring(1.0, 5), 1.0, 1.5, EA=100.0)
     res = solve(Scene(ring, loads=[twisting_moment(1e-3)]), tol=1e-6, raise_on_failure=False, progress=False)
     dg.profile(ring, res.state)

@@ -19,10 +19,15 @@ def _system(scene, state=None):
 
 
 def test_nothing_free_is_trivially_stable():
-    """straight(1.0, 2) clamped at both ends fixes every DOF: it used to raise 'zero-size array' in the
-    stability analysis."""
-    rod = der.rod_from_shape(der.shapes.straight(1.0, 2), 1.0, 1.0)
-    res = der.solve(der.Scene(rod, constraints=[der.clamp("start"), der.clamp("end")]))
+    """An inextensible rod clamped at both ends with no interior node fixes every DOF: it used to raise
+    'zero-size array' in the stability analysis. (The issue's straight(1.0, 2) -- two end edges sharing their
+    middle node -- is now refused before any work: the clamps act on the end cross-sections, and supports at
+    both ends need end edges of their own.)"""
+    with pytest.raises(ValueError, match="supports at both ends need at least 3 edges"):
+        der.Scene(der.rod_from_shape(der.shapes.straight(1.0, 2), 1.0, 1.0),
+                  constraints=[der.clamp("start"), der.clamp("end")])
+    rod = der.rod_from_shape(der.shapes.straight(1.0, 3), 1.0, 1.0)
+    res = der.solve(der.Scene(rod, constraints=[der.clamp("start"), der.clamp("end"), der.fix_theta(1)]))
     assert res.converged and res.stable is True and res.min_eigenvalue == np.inf
     assert "every DOF is fixed" in res.stability_note and res.stability_time >= 0
 

@@ -26,11 +26,12 @@ import numpy as np
 from numba import njit
 
 from ..geometry import transport_frames
+from ..linalg import condense_vector
 from ..scene import evaluate, make_plan
 from .projection import held_strain, inverse_mass, project_force, project_positions, project_velocity
 from .system import (
-    INTERRUPTS, energy_terms, evaluate_system, final_result, floor_verdict, is_interrupt, load_scales, max_strain,
-    newton_error_estimate, residual_norm, residual_vector, transport,
+    INTERRUPTS, constrain_system, energy_terms, evaluate_system, final_result, floor_verdict, is_interrupt,
+    load_scales, max_strain, newton_error_estimate, residual_norm, residual_vector, transport,
 )
 
 STATUS_RUNNING, STATUS_CONVERGED, STATUS_NONFINITE = 0, 1, 2
@@ -76,15 +77,13 @@ def stable_time_step(system, state):
 
 
 def _zero_fixed(ab, system):
-    from ..linalg import constrain_band
-
-    constrain_band(ab, system.kl, system.ku, system.perm, system.fixed, 0.0)
+    constrain_system(system, ab, 0.0)     # T^T K T on the end supports' free variables, held DOFs removed
 
 
 @njit(cache=True)
 def _fire_run(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol, n_steps, dt, dt_max,
               alpha, n_pos, n_min, f_inc, f_dec, alpha0, f_alpha, kl, ku, perm, e_total, work_done, guard,
-              project, w, closed, target, max_strain, noise):
+              project, w, closed, target, max_strain, noise, link_dep, link_const, tri_dep, tri_master, tri_coef):
     """Run up to n_steps FIRE steps in place. Returns (status, steps, residual, dt, alpha, n_pos, e_total,
     work_done, rejected, dt_max): a step rejected near the cap also lowers the cap by 10 %, so that the integrator
     settles below the step at which its energy error shows (fewer restarts: FIRE keeps its momentum).
@@ -111,7 +110,8 @@ def _fire_run(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol,
     for step in range(n_steps):
         residual = 0.0
         for i in range(n):
-            f[i] = 0.0 if fixed[i] else fext[i] - grad[i]
+            f[i] = fext[i] - grad[i]
+        condense_vector(f, tri_dep, tri_master, tri_coef, fixed)   # end supports: forces on the free variables
         if project and not project_force(q, plan.edge_nodes, plan.l_bar, w, closed, f, lam):
             return STATUS_NONFINITE, step, residual, dt, alpha, n_pos, e_total, work_done, rejected, dt_max
         for i in range(n):
@@ -158,10 +158,15 @@ def _fire_run(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol,
             if not fixed[i]:
                 v[i] += dt * f[i] / mass[i]
                 q[i] += dt * v[i]
+        for k in range(link_dep.shape[0]):      # end supports: dependents follow their masters
+            q[link_dep[k]] = link_const[k]
+        for k in range(tri_dep.shape[0]):
+            q[tri_dep[k]] += tri_coef[k] * q[tri_master[k]]
         ok = True
         if project:
             # positions back onto |e_j| = l_j (a step of dt v leaves a strain O(dt^2 v^2 / l^2)); the velocity made
-            # tangent there (RATTLE: the normal part, the constraint impulse, is removed)
+            # tangent there (RATTLE: the normal part, the constraint impulse, is removed). With an inextensible
+            # rod the supports hold their end edges rigidly (no coupled links: see solve_explicit)
             ok = project_positions(q, plan.edge_nodes, plan.l_bar, w, closed, 20, target) <= max_strain
             if ok:
                 ok = project_velocity(q, plan.edge_nodes, plan.l_bar, w, closed, v)
@@ -228,6 +233,10 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
     proj_strain = max(min(1e-3 * strain_tol, 1e-10), PROJECTION_TARGET)
     plan = system.plan
     t_start = time.perf_counter()
+    if project and system.links.tri_dep.size:
+        raise ValueError("the explicit solver cannot yet hold an inextensible rod by a hinge, a roller or a sliding "
+                         "clamp (their end edges move with coupled coordinates, which its length projection does not "
+                         "handle); use solver='implicit', or give the rod EA")
     if project:
         # the penalty is not used: the plan's stretch term keeps only the multiplier (for the residual, the load
         # scale and the tension's geometric stiffness in the stable step); the kernel runs without it
@@ -277,7 +286,8 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
     status, message = "max_iterations", f"no convergence within {options.max_steps} steps"
     last_good = state.copy()
     e_total, work_done = None, 0.0
-    conservative = not (system.plan.has_theta or system.plan.has_dead_torques)
+    conservative = not (system.plan.has_theta or system.plan.has_dead_torques or system.plan.has_follower
+                        or system.plan.has_follower_torques)
     guard = 64 * np.finfo(float).eps if conservative else 1e-6
     best, best_step = np.inf, 0
     best_err = np.inf     # the last Newton error estimate at the round-off floor
@@ -300,7 +310,9 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
                 plan, state.q, state.d1, state.tangents, state.reference_twist, state.lam, v, system.mass,
                 fixed, inv_scale, options.tol, n, dt, dt_max, alpha, n_pos, options.fire_n_min, options.fire_f_inc,
                 options.fire_f_dec, options.fire_alpha, options.fire_f_alpha, system.kl, system.ku, system.perm,
-                e_total, work_done, guard, project, w, rod.closed, PROJECTION_TARGET, proj_strain, noise)
+                e_total, work_done, guard, project, w, rod.closed, PROJECTION_TARGET, proj_strain, noise,
+                system.links.dep, system.links.const, system.links.tri_dep, system.links.tri_master,
+                system.links.tri_coef)
             if done > 0:
                 cost = (time.perf_counter() - t_chunk) / done
                 step_cost = cost if step_cost is None else max(cost, 0.5 * step_cost)

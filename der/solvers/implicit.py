@@ -24,11 +24,11 @@ import time
 
 import numpy as np
 
-from ..linalg import add_diagonal, band_solve, constrain_band
+from ..linalg import add_diagonal, band_solve
 from .system import (
-    FLOOR_FACTOR, INTERRUPTS, constraint_residual, energy_terms, evaluate_system, final_result, floor_forces,
-    floor_verdict, is_interrupt, load_scales, max_strain, multiplier_update, residual_floor, residual_norm,
-    residual_vector, transport,
+    FLOOR_FACTOR, INTERRUPTS, constrain_system, constraint_residual, energy_terms, evaluate_system, expand,
+    final_result, floor_forces, floor_verdict, is_interrupt, load_scales, max_strain, multiplier_update,
+    residual_floor, residual_norm, residual_vector, transport,
 )
 
 STALL_ITERATIONS = 6
@@ -152,8 +152,9 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                     break   # near the round-off floor a step that lowers the energy may not exist
                 work[:] = ab_K
                 add_diagonal(work, kl, ku, perm, diag, 1.0 / dt)
-                constrain_band(work, kl, ku, perm, system.fixed, 1.0)
+                constrain_system(system, work, 1.0)     # T^T (K + D/dt) T: the end supports' free variables
                 delta, info = band_solve(work, kl, ku, perm, R)
+                expand(system, delta)
                 with np.errstate(over="ignore", invalid="ignore"):   # a huge step is refused just below
                     slope = float(R @ delta)
                 if info != 0 or not np.all(np.isfinite(delta)) or slope <= 0:

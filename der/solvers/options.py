@@ -177,6 +177,9 @@ class SolveResult:
     compile_time : seconds spent compiling (or loading from numba's cache) der's kernels before this solve,
         on the first solve of a process; never part of ``wall_time``. 0 afterwards.
     tol : the residual tolerance the solve was asked for.
+    reactions : one dict per constraint: ``support``, ``end`` (or ``node``/``edge``), ``at``, ``force`` and
+        ``moment`` (lab frame, what the support exerts on the rod, moment about ``at``: the end cross-section's
+        centre for clamps, hinges and rollers); see ``der.solvers.system.support_reactions``.
 
     ``print(result)`` shows a short summary (``repr``); the arrays are attributes (``result.state``,
     ``result.eigenvalues``, ``result.history``).
@@ -218,6 +221,7 @@ class SolveResult:
     residual_per_length: float = float("nan")
     stability_time: float = 0.0
     compile_time: float = 0.0
+    reactions: list = field(default_factory=list)
     tol: float = float("nan")
 
     def __repr__(self):

@@ -65,7 +65,7 @@ import numpy as np
 
 from ..linalg import BandLU, add_diagonal, band_negative_pivots, band_to_sparse, constrain_band
 from ..loads import DistributedForce, EndForce, EndTorque, PointForce, TwistingMoment
-from .system import evaluate_system, rotational_inertia
+from .system import condense_system_band, evaluate_system, rotational_inertia
 
 DENSE_MAX_DOFS = 300   # dense eigen-solver only for small systems
 RESIDUAL_TOL = 1e-6    # eigenpairs with a larger relative residual are reported as inaccurate
@@ -245,6 +245,7 @@ def lowest_modes(system, state, n_eigenvalues=6, dense_max=DENSE_MAX_DOFS):
     of M^-1 K)."""
     rod = system.rod
     evaluate_system(system, state, 2)
+    condense_system_band(system, system.ab)   # end supports: T^T K T on their free variables (q = c + T y)
     free = system.free.copy()
     if not rod.closed:
         free[4 * rod.n_nodes - 1] = False

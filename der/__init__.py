@@ -18,6 +18,8 @@ from .constraints import clamp, fix_theta, pin
 from .loads import distributed_force, end_force, end_torque, point_force, twisting_moment
 from .rod import Rod, RodState, rod_from_shape
 from .scene import Scene
+from .terms.contact import self_contact
+from .terms.obstacles import cylinder, plane, sphere
 from .solvers import (
     ConvergenceError, LockedRodWarning, RoundoffFloorWarning, SolveResult, SolverOptions, check_stability, solve,
 )
@@ -27,4 +29,5 @@ __all__ = [
     "shapes", "diagnostics", "solve", "check_stability", "warmup", "SolverOptions", "SolveResult", "ConvergenceError",
     "RoundoffFloorWarning", "LockedRodWarning", "Rod", "RodState", "rod_from_shape", "Scene",
     "clamp", "pin", "fix_theta", "point_force", "end_force", "distributed_force", "end_torque", "twisting_moment",
+    "self_contact", "plane", "sphere", "cylinder",
 ]

@@ -176,6 +176,10 @@ class SolveResult:
     compile_time : seconds spent compiling (or loading from numba's cache) der's kernels before this solve,
         on the first solve of a process; never part of ``wall_time``. 0 afterwards.
     tol : the residual tolerance the solve was asked for.
+    contact : with contact terms, ``der.diagnostics.contact_forces`` at the final state (pairs in contact,
+        force per pair and per length, minimal distance, per term); None otherwise.
+    linear_solves : how many Newton systems the implicit solver factorised on the banded path and on the
+        sparse (contact) path.
 
     ``print(result)`` shows a short summary (``repr``); the arrays are attributes (``result.state``,
     ``result.eigenvalues``, ``result.history``).
@@ -217,6 +221,8 @@ class SolveResult:
     residual_per_length: float = float("nan")
     compile_time: float = 0.0
     tol: float = float("nan")
+    contact: dict | None = None         # contact diagnostics (issue 14; None for a scene without contact)
+    linear_solves: dict = field(default_factory=dict)   # implicit: {"band": count, "sparse": count}
 
     def __repr__(self):
         """One short paragraph: status, residual against tol, iterations, times, stability, message."""

@@ -61,6 +61,11 @@ def stability(system, result, n_eigenvalues=6):
     state = result.state
     evaluate_system(system, state, 2)
     K = band_to_sparse(system.ab, system.kl, system.ku, system.perm).tocsr()
+    if getattr(system, "contact_coo", None):        # contact (issue 14): the off-band barrier Hessian
+        import scipy.sparse as sp
+
+        for r, c, v in system.contact_coo:
+            K = K + sp.csr_matrix((v, (r, c)), shape=K.shape)
     free = system.free.copy()
     rod = system.rod
     if not rod.closed:

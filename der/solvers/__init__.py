@@ -101,6 +101,10 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
         raise ValueError("der.solve: contact terms need the implicit solver (solver='implicit'); the explicit "
                          "solver has no CCD-limited step yet")
     compile_time = _compile_first()
+    if scene.contacts:
+        from ..terms import warmup as _contact_warmup
+
+        compile_time += _contact_warmup()
     system = build_system(scene, options)     # refuses loads whose scale is not a finite double
     work = prepare_state(system, state)
     if not system.terms:                      # (a contact can react to a net load)

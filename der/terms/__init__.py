@@ -36,4 +36,43 @@ def check_term(term, scene):
     term.check_scene(scene)
 
 
+_WARM = []
+
+
+def warmup():
+    """Compile (or load from numba's cache) the contact kernels once per process, on a small ring with every
+    term, so that a solve's wall time holds no compilation. Returns the seconds it took (0 afterwards)."""
+    if _WARM:
+        return 0.0
+    import time
+
+    import numpy as np
+
+    from .. import rod as _rod
+    from .. import shapes
+    from ..scene import Scene
+    from ..solvers.options import SolverOptions
+    from ..solvers.system import build_system, prepare_state
+
+    t0 = time.perf_counter()
+    for closed in (True, False):
+        shape = shapes.ring(1.0, 24) if closed else shapes.straight(1.0, 24)
+        r = _rod.rod_from_shape(shape, 1.0, 1.5)
+        terms = [contact.self_contact(0.02), obstacles.plane([0, 0, -1], [0, 0, 1]),
+                 obstacles.sphere([0, 0, -3], 1.0), obstacles.cylinder([0, 5, 0], [1, 0, 0], 1.0)]
+        system = build_system(Scene(r, contacts=terms), SolverOptions())
+        state = prepare_state(system, r.rest_state())
+        delta = np.zeros(r.n_dof)
+        delta[2::4] = -0.1
+        for t in system.terms:
+            t.check_start(state)
+            t.start_stiffness(state, system)
+            for order in (0, 1, 2):
+                t.evaluate(state, order, system.grad, system.ab, [])
+            t.max_step(state, delta)
+            t.diagnostics(state)
+    _WARM.append(time.perf_counter() - t0)
+    return _WARM[0]
+
+
 from . import contact, obstacles  # noqa: E402,F401  (registration)

@@ -80,11 +80,12 @@ def _add_band(ab, kl, ku, perm, i, j, v):
 
 
 @njit(cache=True)
-def obstacle_system(pos, edges, radius, kind, params, dhat, kappa, order, node_dof, grad, ab, kl, ku, perm):
+def obstacle_system(pos, edges, radius, kind, params, dhat, kappa, order, node_dof, grad, ab, kl, ku, perm, project):
     """Barrier of one obstacle against every node (plane) or edge (sphere, cylinder) of radius ``radius``.
 
     order 0: energy only; 1: also adds dE/dq into grad; 2: also adds the PSD-projected Hessian into the band
-    ``ab`` (blocks of one node or of the two nodes of an edge: inside the band). Returns (energy, n_active,
+    ``ab`` (blocks of one node or of the two nodes of an edge: inside the band; not projected if not
+    ``project``). Returns (energy, n_active,
     min_gap, largest nodal contact force); energy is +inf if something overlaps the obstacle."""
     energy = 0.0
     n_active = 0
@@ -133,10 +134,12 @@ def obstacle_system(pos, edges, radius, kind, params, dhat, kappa, order, node_d
                 grad[node_dof[a] + i] += g6[i]
                 grad[node_dof[b] + i] += g6[3 + i]
         if order >= 2:
-            w, V = np.linalg.eigh(0.5 * (h6 + h6.T))      # eigen-clamp the 6x6 block to PSD (as IPC)
-            for m in range(6):
-                w[m] = max(w[m], 0.0)
-            H = (V * w) @ V.T
+            H = h6
+            if project:
+                w, V = np.linalg.eigh(0.5 * (h6 + h6.T))      # eigen-clamp the 6x6 block to PSD (as IPC)
+                for m in range(6):
+                    w[m] = max(w[m], 0.0)
+                H = (V * w) @ V.T
             for m in range(6):
                 dm = node_dof[a] + m if m < 3 else node_dof[b] + m - 3
                 for n in range(6):

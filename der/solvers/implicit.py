@@ -31,7 +31,11 @@ from .system import (
     residual_vector, transport,
 )
 
+import os
+_DEBUG = bool(os.environ.get("DER_DEBUG_CONTACT"))
 STALL_ITERATIONS = 6
+# contact: below this residual, after a full Newton step, the barrier Hessian is used unprojected
+EXACT_CONTACT_BELOW = 1e-4
 FLOOR_STALL_ITERATIONS = 2      # enough once the residual is down at the round-off floor
 # pseudo-time step reductions (x0.1 each) before a step is declared impossible: enough to go from Newton's
 # method (dt up to 1e30) down to a step that only damps (dt ~ 1e-10); 12 near the round-off floor
@@ -86,8 +90,11 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     potential = potential_best = 0.0     # E - work of the loads, from the start of this loop
     ab_K = np.empty_like(system.ab)
     work = np.empty_like(system.ab)
+    exact_contact = False        # contact: exact (unprojected) barrier Hessian in Newton's end game
     try:
         while True:
+            for t in system.terms:
+                t.project = not exact_contact
             energy = evaluate_system(system, state, 2)
             if system.terms and any([t.after_step(state) for t in system.terms]):
                 # contact: the adaptive barrier stiffness changed (docs/contact.md section 6); a new landscape
@@ -168,6 +175,8 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 with np.errstate(over="ignore", invalid="ignore"):   # a huge step is refused just below
                     slope = float(R @ delta)
                 if info != 0 or not np.all(np.isfinite(delta)) or slope <= 0:
+                    if exact_contact:
+                        break         # the exact contact Hessian is indefinite here: back to the projected one
                     dt = shrink(dt, options)
                     continue
                 a = 1.0
@@ -188,9 +197,13 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                             accepted = True
                             break
                     a *= 0.5
-                if accepted:
+                if accepted or exact_contact:
                     break
                 dt = shrink(dt, options)
+            if not accepted and exact_contact:
+                exact_contact = False
+                it -= 1
+                continue
             if not accepted:
                 evaluate_system(system, state, 2)
                 status, floor, message = floor_verdict(
@@ -201,6 +214,8 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 break
             # the progress measure uses the step actually taken (q + a delta rounded), not a delta: at the floor a
             # step can round back and forth between two states and credit the load work a fext.delta each time
+            if _DEBUG:
+                print("it", it, "a_start", a_start, "a", a, "res", residual, "dt", dt, "gap", [getattr(t, "min_gap", None) for t in system.terms], "kappa", [t.kappa for t in system.terms], "coo", len(coo))
             step = trial.q - state.q
             change = e_trial - energy - float(fext @ step)
             potential += change
@@ -208,6 +223,8 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
             noise = float(round_off @ np.abs(step))
             state.copy_from(trial)
             total_descent += descent
+            if system.contact_coo and a == 1.0 and dt >= options.dt_max and residual < EXACT_CONTACT_BELOW:
+                exact_contact = True
             # trust the pseudo-time step more after a full step, less after a backtrack
             # (a step cut by the CCD bound alone, a == a_start < 1, is a full step of the linearised model)
             dt = min(options.dt_max, dt * options.dt_growth) if a == a_start else max(dt * a / a_start, 1e-12)

@@ -131,6 +131,9 @@ class BoundBarrier:
         self.force_scale = 0.0
         self.n_active = 0
         self.kappa_updates = 0
+        # PSD-project the pair Hessians (IPC); the implicit solver switches to the exact Hessian in Newton's end
+        # game, where the projection would turn its quadratic convergence into a slow linear one
+        self.project = True
 
     def positions(self, state):
         return np.ascontiguousarray(state.q.reshape(-1, 4)[:self.n_nodes, :3])
@@ -230,7 +233,7 @@ class BoundSelfContact(BoundBarrier):
         m = 144 * act.shape[0]
         rows, cols, vals = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64), np.empty(m)
         energy, n_active, nt, min_gap = self.C.assemble_pairs(
-            pos, topo.edges, act, topo.edge_radius, self.dhat, self.kappa, self.C.GAP, order >= 2, self.node_dof,
+            pos, topo.edges, act, topo.edge_radius, self.dhat, self.kappa, self.C.GAP, order >= 2 and self.project, self.node_dof,
             g, rows, cols, vals)
         self.min_gap = float(min_gap)
         if not np.isfinite(energy):

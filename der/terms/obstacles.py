@@ -136,7 +136,7 @@ class BoundObstacle(BoundBarrier):
             grad, ab = s.grad, s.ab          # not written at order 0
         energy, n_active, min_gap, fmax = self.A.obstacle_system(
             self.positions(state), self.edges, self.radius, self.term.kind, self.params, self.dhat, self.kappa, order,
-            self.node_dof, grad, ab, s.kl, s.ku, s.perm)
+            self.node_dof, grad, ab, s.kl, s.ku, s.perm, self.project)
         self.n_active, self.min_gap, self.force_scale = int(n_active), float(min_gap), float(fmax)
         return float(energy)
 
@@ -161,7 +161,7 @@ class BoundObstacle(BoundBarrier):
                 g = np.zeros(n)
                 self.A.obstacle_system(pos[k:k + 1], np.zeros((0, 2), dtype=np.int64), self.radius, kind, self.params,
                                        self.dhat, self.kappa, 1, np.zeros(1, dtype=np.int64), g, dummy, 0, 0,
-                                       np.zeros(1, dtype=np.int64))
+                                       np.zeros(1, dtype=np.int64), True)
                 forces.append(float(np.linalg.norm(g[:3])))
             w = np.zeros(self.n_nodes)          # the length each node stands for: half of each adjacent edge
             np.add.at(w, self.edges[:, 0], 0.5 * self.rod.l_bar)
@@ -175,7 +175,7 @@ class BoundObstacle(BoundBarrier):
             for e in idx:
                 g = np.zeros(n)
                 self.A.obstacle_system(pos, self.edges[e:e + 1], self.radius, kind, self.params, self.dhat, self.kappa,
-                                       1, self.node_dof, g, dummy, 0, 0, np.zeros(1, dtype=np.int64))
+                                       1, self.node_dof, g, dummy, 0, 0, np.zeros(1, dtype=np.int64), True)
                 forces.append(float(np.linalg.norm(g.reshape(-1, 4)[:, :3].sum(axis=0))))
             w = self.rod.l_bar
             points = 0.5 * (pos[self.edges[idx, 0]] + pos[self.edges[idx, 1]])

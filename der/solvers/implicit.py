@@ -31,8 +31,6 @@ from .system import (
     residual_vector, transport,
 )
 
-import os
-_DEBUG = bool(os.environ.get("DER_DEBUG_CONTACT"))
 STALL_ITERATIONS = 6
 # contact: below this residual, after a full Newton step, the barrier Hessian is used unprojected
 EXACT_CONTACT_BELOW = 1e-4
@@ -214,8 +212,6 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 break
             # the progress measure uses the step actually taken (q + a delta rounded), not a delta: at the floor a
             # step can round back and forth between two states and credit the load work a fext.delta each time
-            if _DEBUG:
-                print("it", it, "a_start", a_start, "a", a, "res", residual, "dt", dt, "gap", [getattr(t, "min_gap", None) for t in system.terms], "kappa", [t.kappa for t in system.terms], "coo", len(coo))
             step = trial.q - state.q
             change = e_trial - energy - float(fext @ step)
             potential += change

@@ -183,6 +183,14 @@ def summarise(p, steps):
     if out["torque_plateau"] is not None:
         err["torque_plateau"] = (out["torque_plateau"] - Mp) / Mp
         err["extension_slope"] = (out["extension_slope"] - slope) / slope
+        # the barrier keeps the strands a gap in (0, dhat) apart: the same theory at the contact distance the
+        # solve reached (superhelical radius r_eff = min_distance / 2) separates that from the model's error
+        r_eff = 0.5 * float(np.mean([steps[k]["min_distance"] for k in tail]))
+        Mp_e, theta_e, slope_e = plectoneme_theory(p.A1, p.force, r_eff)
+        out["theory"].update({"contact_radius_reached": r_eff, "torque_plateau_at_r_eff": Mp_e,
+                              "extension_slope_at_r_eff": slope_e})
+        err["torque_plateau_at_r_eff"] = (out["torque_plateau"] - Mp_e) / Mp_e
+        err["extension_slope_at_r_eff"] = (out["extension_slope"] - slope_e) / slope_e
     out["errors"] = err
     out["error"] = out["lk_error_max"]
     out["reference"] = "Lk = N at every step (absolute, turns); theory errors in 'errors' (relative)"
@@ -205,12 +213,16 @@ def picture(p, out):
     if out["torque_plateau"] is not None:
         nb = th["torque_plateau"] * p.L / (2 * np.pi * p.A2)
         ax1.plot([0, nb, N[-1]], [p.L, p.L, p.L + th["extension_slope"] * (N[-1] - nb)], "k--", lw=1,
-                 label="interwound theory")
+                 label="interwound theory (global minimum, no end loop)")
+        k = int(np.argmax(np.array(out["contacts"]) > 0))
+        ax1.plot([N[k], N[-1]], [out["extension"][k], out["extension"][k] + th["extension_slope"] * (N[-1] - N[k])],
+                 "k:", lw=1, label="theory slope -4 pi r / sin 2 theta")
     ax1.set(xlabel="turns N", ylabel="extension", ylim=(0, 1.05 * p.L))
     ax1.legend(fontsize=8)
     ax2.plot(N, out["torque"], "o-", ms=3, label="der")
-    ax2.plot(N, np.minimum(2 * np.pi * p.A2 * N / p.L, th["buckling_torque"]), "k:", lw=1,
-             label="2 pi A2 N / L up to buckling")
+    nb = th["buckling_turns"]
+    ax2.plot([0, nb], [0, th["buckling_torque"]], "k:", lw=1, label="2 pi A2 N / L up to buckling (theory)")
+    ax2.axvline(nb, color="0.6", lw=0.8)
     ax2.axhline(th["torque_plateau"], color="k", ls="--", lw=1, label="plateau (theory)")
     ax2.set(xlabel="turns N", ylabel="torque")
     ax2.legend(fontsize=8)

@@ -158,3 +158,46 @@ def test_obstacle_needs_a_radius_and_contact_needs_the_implicit_solver():
     scene = der.Scene(rod, constraints=[der.clamp("end")], contacts=[der.plane([0, 0, -1], [0, 0, 1], radius=0.01)])
     with pytest.raises(ValueError, match="implicit"):
         der.solve(scene, solver="explicit")
+
+
+def _plectoneme_module():
+    import importlib.util
+
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenarios", "plectoneme.py")
+    spec = importlib.util.spec_from_file_location("plectoneme_scenario", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_plectoneme_theory_limits():
+    P = _plectoneme_module()
+    # clamped Greenhill without tension: M L / A1 = 2 x 4.4934 (tan x = x); long rod: 2 sqrt(A1 F)
+    assert P.buckling_torque(1.0, 1e-3, 1.0) == pytest.approx(8.98682, rel=2e-4)
+    assert P.buckling_torque(2.0, 1.0, 200.0) == pytest.approx(2 * np.sqrt(2.0), rel=1e-3)
+    assert P.buckling_torque(2.0, 1.0, 200.0) > 2 * np.sqrt(2.0)
+    # interwound plateau: small-angle forms theta = (2 r^2 F / 3 A1)^(1/4), M = 2 A1 theta^3 / r
+    r, F, A1 = 0.002, 1.0, 1.0
+    Mp, theta, slope = P.plectoneme_theory(A1, F, r)
+    t0 = (2 * r * r * F / (3 * A1)) ** 0.25
+    assert theta == pytest.approx(t0, rel=2e-2)
+    assert Mp == pytest.approx(2 * A1 * t0 ** 3 / r, rel=3e-2)
+    assert slope == pytest.approx(-4 * np.pi * r / np.sin(2 * theta), rel=1e-12)
+
+
+def test_plectoneme_scenario_contract_and_linking_number():
+    script = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenarios", "plectoneme.py")
+    out = subprocess.run([sys.executable, script, "--L", "10", "--n", "100", "--turns", "3", "--sweep", "12",
+                          "--json"], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    import json
+
+    d = json.loads(out.stdout.strip().splitlines()[-1])
+    for key in ("turns", "extension", "torque", "twist", "writhe", "linking_number", "min_distance", "contacts"):
+        assert len(d[key]) == 12
+    for key in ("buckling_turns", "torque_plateau", "extension_slope"):
+        assert key in d
+    assert np.allclose(d["linking_number"], d["turns"], atol=1e-9, rtol=0)     # Lk = N: no strand passage
+    assert max(d["contacts"]) > 0 and min(d["min_distance"]) >= 2 * 0.05
+    th = d["theory"]
+    assert d["buckling_turns"] < th["buckling_turns"] < d["buckling_turns"] + 0.25 + 1e-12

@@ -201,3 +201,17 @@ def test_plectoneme_scenario_contract_and_linking_number():
     assert max(d["contacts"]) > 0 and min(d["min_distance"]) >= 2 * 0.05
     th = d["theory"]
     assert d["buckling_turns"] < th["buckling_turns"] < d["buckling_turns"] + 0.25 + 1e-12
+
+
+def test_recording_shows_the_contacts(tmp_path):
+    pytest.importorskip("rerun")
+    from der.recording import read_scalars
+
+    rod = _vertical_rod()
+    zb = rod.rest_state().positions[0, 2]
+    scene = der.Scene(rod, loads=[der.end_force([0, 0, -0.5])], constraints=[der.clamp("end", slide=2)],
+                      contacts=[der.plane([0, 0, zb - 0.03], [0, 0, 1], radius=0.02)])
+    path = tmp_path / "contact.rrd"
+    der.solve(scene, record=str(path))
+    _, values = read_scalars(str(path), "contact/0_plane/n_contacts")
+    assert list(values) == [1.0]

@@ -86,7 +86,17 @@ def plane(point, normal, radius=None, dhat=None, kappa=None):
 
 def sphere(centre, R, radius=None, dhat=None, kappa=None):
     """A rigid ball of radius ``R`` around ``centre``: the rod's centreline stays at least R + r from the centre.
-    Other arguments as for ``der.plane``."""
+
+    Parameters
+    ----------
+    centre : 3-vector; R : float > 0 (length)
+    radius, dhat, kappa : as for ``der.plane`` (the rod's radius r, default that of ``der.self_contact``).
+
+    Example
+    -------
+    >>> import der
+    >>> ball = der.sphere([0, 0, -1], 0.5, radius=0.01)
+    """
     c = validate.vector3(centre, "der.sphere: centre")
     R = positive_radius(R, "der.sphere: R")
     return Obstacle(SPHERE, np.concatenate([c, [0.0, 0.0, 0.0], [R]]), *_options(radius, dhat, kappa, "sphere"))
@@ -94,7 +104,18 @@ def sphere(centre, R, radius=None, dhat=None, kappa=None):
 
 def cylinder(point, axis, R, radius=None, dhat=None, kappa=None):
     """A rigid infinite cylinder of radius ``R`` about the line through ``point`` along ``axis``: the rod stays
-    outside, its centreline at least R + r from the axis. Other arguments as for ``der.plane``."""
+    outside, its centreline at least R + r from the axis.
+
+    Parameters
+    ----------
+    point : 3-vector on the axis; axis : 3-vector (any length, normalised); R : float > 0 (length)
+    radius, dhat, kappa : as for ``der.plane`` (the rod's radius r, default that of ``der.self_contact``).
+
+    Example
+    -------
+    >>> import der
+    >>> post = der.cylinder([0, 0, 0], [0, 1, 0], 0.2, radius=0.01)
+    """
     c = validate.vector3(point, "der.cylinder: point")
     a = _unit(axis, "der.cylinder: axis")
     R = positive_radius(R, "der.cylinder: R")

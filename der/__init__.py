@@ -21,6 +21,8 @@ from .loads import (
 )
 from .rod import Rod, RodState, rod_from_shape
 from .scene import Scene
+from .terms.contact import self_contact
+from .terms.obstacles import cylinder, plane, sphere
 from .solvers import (
     ConvergenceError, LockedRodWarning, RoundoffFloorWarning, SolveResult, SolverOptions, check_stability, solve,
 )
@@ -31,4 +33,5 @@ __all__ = [
     "RoundoffFloorWarning", "LockedRodWarning", "Rod", "RodState", "rod_from_shape", "Scene",
     "clamp", "hinge", "roller", "pin", "fix_theta", "point_force", "end_force", "distributed_force", "end_torque",
     "twisting_moment", "point_torque", "follower_force",
+    "self_contact", "plane", "sphere", "cylinder",
 ]

@@ -733,3 +733,52 @@ def end_motion(rod, state, end="end"):
     p, F = end_frame(rod, state, end)
     Q = F.T @ F0                       # maps rest frame vectors to current ones: Q F0[i] = F[i]
     return F0 @ (p - p0), F0 @ rotation_vector(Q)
+
+
+def contact_forces(scene, state):
+    """Contact diagnostics of a scene's contact terms (issue 14) at ``state``.
+
+    Parameters
+    ----------
+    scene : der.Scene with ``contacts`` (or the solver's internal system, which keeps the barrier stiffness the
+        solve adapted: ``result.contact`` is this at the final state).
+    state : der.RodState
+
+    Returns
+    -------
+    dict with ``n_contacts`` (pairs or obstacle elements whose gap is below dhat), ``min_distance`` (the
+    smallest centreline distance between non-neighbour edges, or to an obstacle, over all terms; length),
+    ``total_force`` and ``terms``: one dict per term with ``pairs`` (edge index pairs) or ``elements``,
+    ``gap`` (surface gaps, length), ``force`` (|-kappa b'(gap)|, force units), ``force_per_length`` (force over
+    the pair's mean rest edge length, or the element's length share), ``points`` (contact points),
+    ``min_distance``, ``kappa``, ``dhat``, ``radius``. With a Scene the barrier stiffness is the term's
+    ``kappa`` or its adaptive start value (the forces of an equilibrium do not depend on it to within the gap's
+    change, but their split between neighbouring pairs may).
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 10), A1=1.0, A2=1.5)
+    >>> scene = der.Scene(rod, contacts=[der.plane([0, 0, -1], [0, 0, 1], radius=0.05)])
+    >>> der.diagnostics.contact_forces(scene, rod.rest_state())["n_contacts"]
+    0
+    """
+    system = scene
+    if not hasattr(scene, "terms"):
+        from .solvers.options import SolverOptions
+        from .solvers.system import build_system, prepare_state
+
+        if not scene.contacts:
+            return {"n_contacts": 0, "min_distance": float("inf"), "total_force": 0.0, "terms": []}
+        check_state(scene.rod, state, "der.diagnostics.contact_forces")
+        system = build_system(scene, SolverOptions())
+        state = prepare_state(system, state)
+        for t in system.terms:
+            t.start_stiffness(state, system)
+    terms = [t.diagnostics(state) for t in system.terms]
+    return {
+        "n_contacts": int(sum(t["n_contacts"] for t in terms)),
+        "min_distance": float(min((t["min_distance"] for t in terms), default=float("inf"))),
+        "total_force": float(sum(t["total_force"] for t in terms)),
+        "terms": terms,
+    }

@@ -216,6 +216,27 @@ class Recorder:
                                           f"residual {result.residual:.3e}; {result.message}"))
         self.rec.flush()
         self.last_flush = time.perf_counter()
+        last = getattr(self, "last_logged", None)
+        if last is None or last[0] != result.iterations or not np.array_equal(last[1], result.state.q):
+            self.log_step(result.iterations, result.state, result.residual, result.energy)
+        if getattr(result, "contact", None):
+            self.log_contact(result.contact)
+
+    def log_contact(self, contact):
+        """Contact points (``contact/<term>/points``) and, for self-contact, the force on each pair as arrows
+        along the contact normal, scaled to the largest force (``contact/<term>/forces``); from
+        ``result.contact`` at the final state."""
+        rr = self.rr
+        for k, term in enumerate(contact["terms"]):
+            name = f"contact/{k}_{term['kind']}"
+            pts = np.asarray(term["points"], float).reshape(-1, 3)
+            self.rec.log(f"{name}/points", rr.Points3D(pts, colors=[[255, 200, 0]], radii=term["radius"]))
+            forces = np.asarray(term["force"], float)
+            if "normals" in term and forces.size and np.isfinite(forces).all() and forces.max() > 0:
+                v = np.asarray(term["normals"], float).reshape(-1, 3) * (forces / forces.max())[:, None]
+                self.rec.log(f"{name}/forces", rr.Arrows3D(origins=pts, vectors=self.arrow_length * v,
+                                                           colors=[[255, 120, 0]]))
+            self.rec.log(f"{name}/n_contacts", rr.Scalars(float(term["n_contacts"])))
 
     def flush(self):
         if not self.closed:

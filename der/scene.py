@@ -42,6 +42,10 @@ class Scene:
         ``der.twisting_moment``, ``der.point_torque``, ``der.follower_force`` records.
     constraints : sequence
         ``der.clamp``, ``der.hinge``, ``der.roller``, ``der.pin``, ``der.fix_theta`` records.
+    contacts : sequence
+        Contact terms (issue 14): ``der.self_contact(radius)``, ``der.plane(point, normal)``,
+        ``der.sphere(centre, R)``, ``der.cylinder(point, axis, R)`` (registered in ``der.terms``; their energy is
+        added to the rod's). A scene without them loads no contact code and solves exactly as before.
 
     Everything is checked here, before any work: an unknown load or constraint, a node out of range, an end
     load on a ring, conflicting pins raise a ValueError (or TypeError) naming the argument. Loads act in the
@@ -61,6 +65,7 @@ class Scene:
     energies: tuple = ENERGY_TERMS
     loads: tuple = ()
     constraints: tuple = ()
+    contacts: tuple = ()
 
     def __post_init__(self):
         if not isinstance(self.rod, Rod):
@@ -76,6 +81,12 @@ class Scene:
         for load in self.loads:
             _check_load(self.rod, load)
         _constraints.validate(self.rod, self.constraints)
+        object.__setattr__(self, "contacts", tuple(self.contacts))
+        if self.contacts:
+            from .terms import check_term
+
+            for term in self.contacts:
+                check_term(term, self)
 
     @property
     def fixed(self):

@@ -180,6 +180,10 @@ class SolveResult:
     reactions : one dict per constraint: ``support``, ``end`` (or ``node``/``edge``), ``at``, ``force`` and
         ``moment`` (lab frame, what the support exerts on the rod, moment about ``at``: the end cross-section's
         centre for clamps, hinges and rollers); see ``der.solvers.system.support_reactions``.
+    contact : with contact terms, ``der.diagnostics.contact_forces`` at the final state (pairs in contact,
+        force per pair and per length, minimal distance, per term); None otherwise.
+    linear_solves : how many Newton systems the implicit solver factorised on the banded path and on the
+        sparse (contact) path.
 
     ``print(result)`` shows a short summary (``repr``); the arrays are attributes (``result.state``,
     ``result.eigenvalues``, ``result.history``).
@@ -223,6 +227,8 @@ class SolveResult:
     compile_time: float = 0.0
     reactions: list = field(default_factory=list)
     tol: float = float("nan")
+    contact: dict | None = None         # contact diagnostics (issue 14; None for a scene without contact)
+    linear_solves: dict = field(default_factory=dict)   # implicit: {"band": count, "sparse": count}
 
     def __repr__(self):
         """One short paragraph: status, residual against tol, iterations, times, stability, message."""

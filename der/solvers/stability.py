@@ -257,7 +257,13 @@ def lowest_modes(system, state, n_eigenvalues=6, dense_max=DENSE_MAX_DOFS):
            "n_symmetry": 0, "symmetric": True, "n_free": n, "method": "none", "scale": 1.0}
     if n == 0:
         return out
-    K = band_to_sparse(system.ab, system.kl, system.ku, system.perm).tocsr()[idx][:, idx]
+    K = band_to_sparse(system.ab, system.kl, system.ku, system.perm).tocsr()
+    if getattr(system, "contact_coo", None):        # contact (issue 14): the off-band barrier Hessian
+        import scipy.sparse as sp
+
+        for r, c, v in system.contact_coo:
+            K = K + sp.csr_matrix((v, (r, c)), shape=K.shape)
+    K = K.tocsr()[idx][:, idx]
     m = mass[idx]
     k_abs = abs(K)
     massive = m > 0
@@ -371,15 +377,22 @@ def _banded_lowest(system, K, idx, mass, m, V, k, symmetric, scale):
     ab = system.ab.copy(order="F")
     add_diagonal(ab, system.kl, system.ku, system.perm, mass, -sigma)
     constrain_band(ab, system.kl, system.ku, system.perm, ~_free_full(system), 1.0)
-    lu = BandLU(ab, system.kl, system.ku, system.perm)
     full = np.zeros(rod.n_dof)
+    if getattr(system, "contact_coo", None):
+        # contact couples DOFs off the band: factorise the sparse K - sigma M on the free DOFs instead
+        sparse_lu = spla.splu((K - sigma * sp.diags(m)).tocsc())
 
-    def solve_b(b):
-        if b.ndim == 2:
-            return np.column_stack([solve_b(b[:, j]) for j in range(b.shape[1])])
-        full[:] = 0.0
-        full[idx] = b
-        return lu.solve(full)[idx]
+        def solve_b(b):
+            return sparse_lu.solve(np.asarray(b, float))
+    else:
+        lu = BandLU(ab, system.kl, system.ku, system.perm)
+
+        def solve_b(b):
+            if b.ndim == 2:
+                return np.column_stack([solve_b(b[:, j]) for j in range(b.shape[1])])
+            full[:] = 0.0
+            full[idx] = b
+            return lu.solve(full)[idx]
 
     Mdiag = sp.diags(m)
     if V.shape[1]:

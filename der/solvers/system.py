@@ -159,6 +159,10 @@ def build_system(scene, options):
                     M_app, np.zeros(n), np.zeros(n), new_band(n, kl, ku), links, mass.copy())
     system.mass = condensed_mass(system)
     system.k_initial = plan.k_stretch.copy()
+    # contact terms (der/terms), bound for this solve; () for a scene without contact (nothing is imported)
+    system.terms = tuple(term.bind(system) for term in scene.contacts)
+    system.contact_coo = []
+    system.linear_solves = {"band": 0, "sparse": 0}
     return system
 
 
@@ -214,9 +218,22 @@ def expand(system, delta):
 
 
 def evaluate_system(system, state, order):
-    """Energy; fills system.grad, system.fext (and system.ab with order 2)."""
-    return evaluate(system.plan, state.q, state.d1, state.reference_twist, state.lam, order, system.grad,
-                    system.fext, system.ab, system.kl, system.ku, system.perm)
+    """Energy; fills system.grad, system.fext (and system.ab with order 2). With contact terms their energy,
+    gradient and band-local Hessian blocks are added, and their off-band Hessian triplets are left in
+    ``system.contact_coo`` (a list of (rows, cols, vals); empty while no pair is active)."""
+    energy = evaluate(system.plan, state.q, state.d1, state.reference_twist, state.lam, order, system.grad,
+                      system.fext, system.ab, system.kl, system.ku, system.perm)
+    if system.terms:
+        if order >= 2:
+            system.contact_coo = []
+        for term in system.terms:
+            energy += term.evaluate(state, order, system.grad, system.ab, system.contact_coo)
+    return energy
+
+
+def contact_force_scale(system):
+    """The largest contact force on a node at the last evaluation (0 without contact terms)."""
+    return max((t.force_scale for t in system.terms), default=0.0)
 
 
 def load_scales(system, state):
@@ -239,7 +256,7 @@ def load_scales(system, state):
         f_int = 0.0
     if m_int <= eps100 * X * A / h ** 2:
         m_int = 0.0
-    F_raw = max(system.applied_force, f_int)
+    F_raw = max(system.applied_force, f_int, contact_force_scale(system))   # contact forces are loads too
     M_raw = max(system.applied_moment, m_int)
     if F_raw == 0.0 and M_raw == 0.0:
         return rod.A1 / L ** 2, rod.A1 / L
@@ -526,6 +543,8 @@ def energy_terms(system, state):
     if plan.has_twist:
         out["twist"] = float(twist_energy(state.q, rod.vertex_edges, state.reference_twist, plan.weld, rod.twist_bar,
                                           rod.voronoi, rod.A2))
+    if system.terms:
+        out["contact"] = float(sum(t.evaluate(state, 0, None, None, None) for t in system.terms))
     return out
 
 

@@ -43,6 +43,8 @@ PARAMETERS = [
      Range(0, 10000)),
     ("perturb", 0.0, float, "out-of-plane perturbation (fraction of a0) applied at the start of every step",
      Range(0.0, 0.5, open_hi=True)),
+    ("radius", None, float, "rod radius r for self-contact (issue 14): strands stay 2r apart and never pass through "
+     "each other (default: no contact)", Range(0.0, lambda p: 0.5 * p.a0, open_lo=True, why="0 < r < a0/2")),
     ("locate", True, bool, "bisect the stability threshold found by the sweep (--no-locate: interpolate it)"),
     ("png", None, str, "write a picture of the final ring (with --sweep: four states along it) to this PNG"),
 ]
@@ -72,6 +74,11 @@ def start_state(rod, state, twist_from, twist_to, eps, a0):
     return rod.displaced(state, dx, dtheta)
 
 
+def contacts(p):
+    """The contact terms of the scene: self-contact of radius --radius, or none."""
+    return [der.self_contact(p.radius)] if p.radius else []
+
+
 def observe(rod, result, twist, p):
     st = result.state
     lk, tw, wr = dg.linking_number(rod, st)
@@ -86,7 +93,18 @@ def observe(rod, result, twist, p):
         "twist_strain_spread": float((strain.max() - strain.min()) * p.a0),
         "energy": float(sum(result.energy.values())) if result.energy else None,
         "min_eigenvalue": result.min_eigenvalue, "stable": result.stable,
+        "min_distance": _min_distance(result), "contacts": _n_contacts(result),
     }
+
+
+def _min_distance(result):
+    c = getattr(result, "contact", None)
+    return None if not c else c.get("min_distance")
+
+
+def _n_contacts(result):
+    c = getattr(result, "contact", None)
+    return 0 if not c else int(sum(t.get("n_contacts", 0) for t in c.get("terms", [])))
 
 
 def default_twist(p):
@@ -103,7 +121,7 @@ def run(p, solver):
     sweep, states = [], []
     for twist in steps:
         rod = base.with_imposed_twist(twist)
-        scene = der.Scene(rod)
+        scene = der.Scene(rod, contacts=contacts(p))
         result = solver.solve(scene, state=start_state(rod, state, welded, twist, p.perturb, p.a0))
         sweep.append(observe(rod, result, float(twist), p))
         states.append(result.state)
@@ -112,19 +130,22 @@ def run(p, solver):
         state, welded = result.state, float(twist)
     last = sweep[-1]
     out = {k: last[k] for k in ("twist_total", "writhe", "linking_number", "lk_error", "out_of_plane",
-                                "twist_strain_spread", "min_eigenvalue", "stable")}
+                                "twist_strain_spread", "min_eigenvalue", "stable", "energy", "min_distance",
+                                "contacts")}
+    out["radius"] = p.radius
     out["kappa0"] = kappa0
     out["lk_error_max"] = max(s["lk_error"] for s in sweep)
     michell = cf.michell_twist(p.A1, p.A2)
     out["michell_twist"] = michell
     out.update(_threshold(p, solver, base, sweep, states))
-    # der has no self-contact: a writhing ring can pass through itself, which changes Lk by 2
+    # without --radius there is no self-contact: a writhing ring can pass through itself, which changes Lk by 2
     passages = [s for s in sweep if s["lk_error"] > 0.5]
     out["strand_passage_at"] = passages[0]["twist"] if passages else None
     if passages:
         jump = passages[0]["linking_number"] - passages[0]["twist"] / (2 * np.pi)
         out["note"] = (f"the ring passed through itself at twist {passages[0]['twist']:.6g} (Lk changed by "
-                       f"{jump:+.3g}): der has no self-contact, so states beyond that are not those of a real rod")
+                       f"{jump:+.3g}): without --radius there is no self-contact, so states beyond that are not those of a "
+                       "real rod")
         # the run contradicts its own check (Lk conserved): exit 3 with this reason (der.cli)
         out["check_failed"] = out["note"]
     if passages:
@@ -218,7 +239,8 @@ def _bisect(p, solver, base, state, lo, hi):
     while hi - lo > LOCATE_TOL * abs(hi):
         mid = 0.5 * (lo + hi)
         rod = base.with_imposed_twist(mid)
-        result = solver.solve(der.Scene(rod), state=start_state(rod, state, welded, mid, 0.0, p.a0))
+        result = solver.solve(der.Scene(rod, contacts=contacts(p)),
+                              state=start_state(rod, state, welded, mid, 0.0, p.a0))
         if not result.converged:
             raise RuntimeError(f"bisection solve failed at twist = {mid}: {result.message}")
         if result.stable:

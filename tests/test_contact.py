@@ -215,3 +215,27 @@ def test_recording_shows_the_contacts(tmp_path):
     der.solve(scene, record=str(path))
     _, values = read_scalars(str(path), "contact/0_plane/n_contacts")
     assert list(values) == [1.0]
+
+
+def test_twisted_ring_scenario_with_radius_supercoils_without_passage():
+    """scenarios/twisted_ring.py --radius (issue 14): past Michell's threshold the naturally straight ring, kicked
+    out of plane, passes through itself without contact (Lk jumps by 2, exit 3) and settles into a
+    self-contacting supercoil with it (Lk = twist / 2 pi at every step, strands >= 2r apart, exit 0)."""
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    env = dict(os.environ, PYTHONPATH=str(root))
+    args = [sys.executable, str(root / "scenarios" / "twisted_ring.py"), "--kappa0", "0", "--twist", "14",
+            "--sweep", "7", "--n", "60", "--perturb", "0.01", "--json"]
+    free = subprocess.run(args, capture_output=True, text=True, env=env, timeout=300)
+    assert free.returncode == 3 and json.loads(free.stdout.splitlines()[-1])["strand_passage_at"] is not None
+    held = subprocess.run(args + ["--radius", "0.05"], capture_output=True, text=True, env=env, timeout=300)
+    out = json.loads(held.stdout.splitlines()[-1])
+    assert held.returncode == 0, held.stderr
+    assert out["strand_passage_at"] is None and out["lk_error_max"] < 1e-9
+    assert out["writhe"] > 1.0 and out["contacts"] > 0 and out["min_distance"] >= 2 * 0.05
+    assert all(s["lk_error"] < 1e-9 and s["min_distance"] >= 0.1 for s in out["sweep"])

@@ -1,8 +1,9 @@
 """der: discrete elastic rods with natural curvature and twist (Drozdov & Rabin), compiled with numba.
 
 Build a rod from a shape (``rod_from_shape(shapes.helix(...), A1, A2)``), put it in a ``Scene`` with loads
-(``point_force``, ``end_force``, ``distributed_force``, ``end_torque``, ``twisting_moment``) and constraints
-(``clamp``, ``pin``, ``fix_theta``), relax it with ``solve``; read the paper's variables with ``diagnostics``.
+(``point_force``, ``end_force``, ``distributed_force``, ``end_torque``, ``twisting_moment``, ``point_torque``,
+``follower_force``) and constraints (``clamp``, ``hinge``, ``roller``, ``pin``, ``fix_theta``), relax it with
+``solve``; read the paper's variables with ``diagnostics``.
 Every public name has a docstring with units, sign conventions and an example: ``help(der.end_torque)``.
 
 Example
@@ -14,11 +15,15 @@ Example
 True
 """
 from . import diagnostics, shapes
-from .constraints import clamp, fix_theta, pin
+from .constraints import clamp, fix_theta, hinge, pin, roller
 from .continuation import Branch, continuation
-from .loads import distributed_force, end_force, end_torque, point_force, twisting_moment
+from .loads import (
+    distributed_force, end_force, end_torque, follower_force, point_force, point_torque, twisting_moment,
+)
 from .rod import Rod, RodState, rod_from_shape
 from .scene import Scene
+from .terms.contact import self_contact
+from .terms.obstacles import cylinder, plane, sphere
 from .solvers import (
     ConvergenceError, LockedRodWarning, RoundoffFloorWarning, SolveResult, SolverOptions, check_stability, solve,
 )
@@ -28,6 +33,8 @@ from .warmup import warmup
 __all__ = [
     "shapes", "diagnostics", "solve", "check_stability", "warmup", "SolverOptions", "SolveResult", "ConvergenceError",
     "RoundoffFloorWarning", "LockedRodWarning", "Rod", "RodState", "rod_from_shape", "Scene",
-    "clamp", "pin", "fix_theta", "point_force", "end_force", "distributed_force", "end_torque", "twisting_moment",
+    "clamp", "hinge", "roller", "pin", "fix_theta", "point_force", "end_force", "distributed_force", "end_torque",
+    "twisting_moment", "point_torque", "follower_force",
+    "self_contact", "plane", "sphere", "cylinder",
     "continuation", "Branch", "sweep", "SweepResult",
 ]

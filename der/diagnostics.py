@@ -470,6 +470,43 @@ def _edge_forces(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_e
     return F, M
 
 
+def _extensible_stiffness(rod):
+    """EA / l per edge, the end edges of an open rod at half weight (what the solvers use:
+    ``der.solvers.system.axial_penalty``)."""
+    k = np.broadcast_to(np.asarray(rod.EA, float), rod.l_bar.shape) / rod.l_bar
+    if not rod.closed:
+        k = k.copy()
+        k[[0, -1]] *= 0.5
+    return k
+
+
+def reactions(scene, state):
+    """The reaction of every constraint of ``scene`` at ``state``: what ``der.solve`` reports as
+    ``result.reactions`` (one dict per constraint: ``support``, ``end``/``node``/``edge``, ``at``, ``force``,
+    ``moment``; lab frame, what the support exerts on the rod, moment about ``at`` -- the end cross-section's
+    centre for clamps, hinges and rollers). At an equilibrium the reactions and the loads balance, forces and
+    moments; away from one they include the out-of-balance forces on the supported nodes.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 20, axis=(1, 0, 0), director=(0, 0, 1)), 1.0, 1.0)
+    >>> scene = der.Scene(rod, loads=[der.end_force([0, -1e-3, 0])], constraints=[der.clamp("start")])
+    >>> r = der.diagnostics.reactions(scene, der.solve(scene).state)[0]
+    >>> [round(float(v), 9) + 0.0 for v in r["force"]], [round(float(v), 9) + 0.0 for v in r["moment"]]
+    ([0.0, 0.001, 0.0], [0.0, 0.0, 0.001])
+    """
+    from .solvers.options import SolverOptions
+    from .solvers.system import build_system, evaluate_system, support_reactions, update_links
+
+    system = build_system(scene, SolverOptions())
+    if state.penalty is not None:
+        system.plan.k_stretch[:] = state.penalty
+    update_links(system, state)
+    evaluate_system(system, state, 1)
+    return support_reactions(system, state)
+
+
 def internal_forces(rod, state, k_stretch=None, energies=("stretch", "bend", "twist")):
     """Internal force across each edge (force units), global frame: F_j = sum of dE/de_j over the energy
     terms (paper's convention: at a free end F equals the applied end force). The tension of an
@@ -501,7 +538,7 @@ def internal_forces(rod, state, k_stretch=None, energies=("stretch", "bend", "tw
         if state.penalty is not None:
             k_stretch = state.penalty
         else:
-            k_stretch = np.zeros(rod.n_edges) if rod.inextensible else rod.EA / rod.l_bar
+            k_stretch = np.zeros(rod.n_edges) if rod.inextensible else _extensible_stiffness(rod)
     lam = state.lam if state.lam.size == rod.n_edges else np.zeros(rod.n_edges)
     kappa_bar = rod.natural_curvature_edges().reshape(-1, 4)
     return _edge_forces(state.q, state.d1, state.reference_twist, lam, rod.edge_nodes, rod.vertex_nodes,
@@ -696,3 +733,52 @@ def end_motion(rod, state, end="end"):
     p, F = end_frame(rod, state, end)
     Q = F.T @ F0                       # maps rest frame vectors to current ones: Q F0[i] = F[i]
     return F0 @ (p - p0), F0 @ rotation_vector(Q)
+
+
+def contact_forces(scene, state):
+    """Contact diagnostics of a scene's contact terms (issue 14) at ``state``.
+
+    Parameters
+    ----------
+    scene : der.Scene with ``contacts`` (or the solver's internal system, which keeps the barrier stiffness the
+        solve adapted: ``result.contact`` is this at the final state).
+    state : der.RodState
+
+    Returns
+    -------
+    dict with ``n_contacts`` (pairs or obstacle elements whose gap is below dhat), ``min_distance`` (the
+    smallest centreline distance between non-neighbour edges, or to an obstacle, over all terms; length),
+    ``total_force`` and ``terms``: one dict per term with ``pairs`` (edge index pairs) or ``elements``,
+    ``gap`` (surface gaps, length), ``force`` (|-kappa b'(gap)|, force units), ``force_per_length`` (force over
+    the pair's mean rest edge length, or the element's length share), ``points`` (contact points),
+    ``min_distance``, ``kappa``, ``dhat``, ``radius``. With a Scene the barrier stiffness is the term's
+    ``kappa`` or its adaptive start value (the forces of an equilibrium do not depend on it to within the gap's
+    change, but their split between neighbouring pairs may).
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 10), A1=1.0, A2=1.5)
+    >>> scene = der.Scene(rod, contacts=[der.plane([0, 0, -1], [0, 0, 1], radius=0.05)])
+    >>> der.diagnostics.contact_forces(scene, rod.rest_state())["n_contacts"]
+    0
+    """
+    system = scene
+    if not hasattr(scene, "terms"):
+        from .solvers.options import SolverOptions
+        from .solvers.system import build_system, prepare_state
+
+        if not scene.contacts:
+            return {"n_contacts": 0, "min_distance": float("inf"), "total_force": 0.0, "terms": []}
+        check_state(scene.rod, state, "der.diagnostics.contact_forces")
+        system = build_system(scene, SolverOptions())
+        state = prepare_state(system, state)
+        for t in system.terms:
+            t.start_stiffness(state, system)
+    terms = [t.diagnostics(state) for t in system.terms]
+    return {
+        "n_contacts": int(sum(t["n_contacts"] for t in terms)),
+        "min_distance": float(min((t["min_distance"] for t in terms), default=float("inf"))),
+        "total_force": float(sum(t["total_force"] for t in terms)),
+        "terms": terms,
+    }

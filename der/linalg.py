@@ -172,3 +172,80 @@ def band_negative_pivots(ab, kl, ku, perm, shift, mass, fixed):
                     v -= L[i, i - j] * L[k, s] * D[j]
             L[i, s_ik] = v / dk
     return negatives
+
+
+class BandLU:
+    """LU factorisation of a band matrix (LAPACK dgbtrf), reused for any number of solves (dgbtrs): O(n b^2)
+    once, O(n b) per solve, in original DOF order. ``ab`` (general-band storage, ``kl`` spare rows) is
+    overwritten by the factors. ``info > 0`` marks an exactly singular pivot (solves are then invalid)."""
+
+    def __init__(self, ab, kl, ku, perm):
+        from scipy.linalg.lapack import dgbtrf
+
+        self.kl, self.ku, self.perm = kl, ku, perm
+        self.lu, self.piv, self.info = dgbtrf(ab, kl, ku, overwrite_ab=True)
+
+    def solve(self, rhs, trans=False):
+        """x with A x = rhs (or A^T x = rhs with ``trans``); ``rhs`` (n,) or (n, k) in DOF order."""
+        from scipy.linalg.lapack import dgbtrs
+
+        if self.info > 0:
+            raise np.linalg.LinAlgError(f"band matrix exactly singular (zero pivot {self.info})")
+        b = np.empty_like(rhs, dtype=float)
+        b[self.perm] = rhs
+        x, info = dgbtrs(self.lu, self.kl, self.ku, b if b.ndim == 2 else b[:, None], self.piv,
+                         trans=1 if trans else 0)
+        x = x if b.ndim == 2 else x[:, 0]
+        return x[self.perm]
+
+
+@njit(cache=True)
+def condense_band(ab, kl, ku, perm, tri_dep, tri_master, tri_coef):
+    """A <- T^T A T (in place) for the change of variables q = c + T y of the end supports: with q_d = c_d +
+    sum a_dm q_m for each triplet (d, m, a), row m += a row d, then column m += a column d. The rows and columns
+    of the dependents d are left as they are (the caller replaces them, e.g. by ``constrain_band``). Dependents
+    are never masters, and every master lies on the same end edge, inward of or beside its dependent, so the
+    result keeps the band; an entry that would leave it raises ValueError."""
+    n = ab.shape[1]
+    off = kl + ku
+    for k in range(tri_dep.shape[0]):
+        pd = perm[tri_dep[k]]
+        pm = perm[tri_master[k]]
+        a = tri_coef[k]
+        for j in range(max(0, pd - kl), min(n - 1, pd + ku) + 1):      # row pm += a row pd
+            v = ab[off + pd - j, j]
+            if v == 0.0:
+                continue
+            if j < pm - kl or j > pm + ku:
+                raise ValueError("condense_band: a support link leaves the band")
+            ab[off + pm - j, j] += a * v
+    for k in range(tri_dep.shape[0]):
+        pd = perm[tri_dep[k]]
+        pm = perm[tri_master[k]]
+        a = tri_coef[k]
+        for i in range(max(0, pd - ku), min(n - 1, pd + kl) + 1):      # column pm += a column pd
+            v = ab[off + i - pd, pd]
+            if v == 0.0:
+                continue
+            if i < pm - ku or i > pm + kl:
+                raise ValueError("condense_band: a support link leaves the band")
+            ab[off + i - pm, pm] += a * v
+
+
+@njit(cache=True)
+def condense_vector(r, tri_dep, tri_master, tri_coef, fixed):
+    """r <- T^T r (in place) on the free DOFs, zero on held ones: r_m += a r_d, then r[fixed] = 0."""
+    for k in range(tri_dep.shape[0]):
+        r[tri_master[k]] += tri_coef[k] * r[tri_dep[k]]
+    for i in range(r.shape[0]):
+        if fixed[i]:
+            r[i] = 0.0
+
+
+@njit(cache=True)
+def expand_step(delta, tri_dep, tri_master, tri_coef):
+    """delta <- T delta (in place) for a step with zero entries on the dependents: delta_d = sum a delta_m."""
+    for k in range(tri_dep.shape[0]):
+        delta[tri_dep[k]] = 0.0
+    for k in range(tri_dep.shape[0]):
+        delta[tri_dep[k]] += tri_coef[k] * delta[tri_master[k]]

@@ -68,6 +68,26 @@ class TwistingMoment:
     density: float
 
 
+@dataclass(frozen=True)
+class PointTorque:
+    """A torque on the material frame of edge ``edge`` (any edge, interior ones included).
+
+    ``follower=False``: a dead torque, ``torque`` a fixed 3-vector (force * length).
+    ``follower=True``: ``torque`` a scalar T about the edge's current tangent (positive over-twists), or a
+    3-vector of components along the edge's current material frame (m1, m2, t). Made by ``der.point_torque``."""
+    edge: int
+    torque: object
+    follower: bool = False
+
+
+@dataclass(frozen=True)
+class FollowerForce:
+    """A force per unit rest length that turns with the cross-section: ``density`` = (f1, f2, ft), its
+    components along the material directors m1, m2 and the tangent t of each edge. Made by
+    ``der.follower_force``."""
+    density: tuple
+
+
 ENDS = ("start", "end")
 
 
@@ -235,6 +255,82 @@ def twisting_moment(density):
     return TwistingMoment(validate.finite_number(density, "der.twisting_moment: density"))
 
 
+def point_torque(edge, torque, follower=False):
+    """A torque on the cross-section of one edge (interior edges included): dead or follower.
+
+    Parameters
+    ----------
+    edge : int
+        Edge index, 0 ... n_edges - 1 (negative counts from the end). Edge j's cross-section is at its midpoint,
+        arc length ``Rod.xi_edges()[j]``; the end edges' are the end cross-sections (``der.end_torque``).
+    torque : 3-vector (dead), float or 3-vector (follower)
+        ``follower=False``: a fixed vector in the global frame (force * length); its component along the edge
+        tangent twists, the rest bends. ``follower=True``: a scalar T, the moment T t about the edge's CURRENT
+        tangent t (right-handed about the direction of increasing arc length); or a 3-vector (T1, T2, Tt), the
+        moment T1 m1 + T2 m2 + Tt t in the edge's current material frame (it turns with the cross-section; its
+        load stiffness is in the Newton matrix).
+    follower : bool
+
+    Returns
+    -------
+    PointTorque, to pass in ``der.Scene(rod, loads=[...])``.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 20), A1=1.0, A2=1.5)
+    >>> scene = der.Scene(rod, loads=[der.point_torque(10, [1e-3, 0, 0])], constraints=[der.clamp("start")])
+    """
+    if not isinstance(follower, (bool, np.bool_)):
+        raise TypeError(f"der.point_torque: follower must be True or False; got {follower!r}")
+    edge = validate.integer(edge, "der.point_torque: edge", "an integer edge index")
+    if follower:
+        if np.ndim(torque) == 1:
+            return PointTorque(edge, tuple(validate.vector3(
+                torque, "der.point_torque: torque (follower=True: components along m1, m2, t)")), True)
+        if np.ndim(torque) != 0 and not isinstance(torque, str):
+            raise ValueError(f"der.point_torque: a follower torque (follower=True) is a scalar T (about the current "
+                             f"edge tangent) or a 3-vector in the material frame (m1, m2, t); got torque={torque!r}")
+        return PointTorque(edge, validate.finite_number(torque, "der.point_torque: torque (follower=True)"), True)
+    if np.ndim(torque) == 0 and not isinstance(torque, (str, type(None))):
+        raise ValueError(f"der.point_torque: a dead torque (follower=False) is a 3-vector [Tx, Ty, Tz] in the global "
+                         f"frame; got the scalar torque={torque!r} (about the current tangent: follower=True)")
+    return PointTorque(edge, tuple(validate.vector3(torque, "der.point_torque: torque")), False)
+
+
+def follower_force(density):
+    """A uniform force per unit REST length that turns with the cross-section (pressure-like, a follower load).
+
+    Parameters
+    ----------
+    density : 2- or 3-vector
+        (f1, f2) or (f1, f2, ft): the force per unit rest length along the current material directors m1, m2
+        of each edge (and along its tangent t), force / length. A pressure on a rod bent in the (t, m1) plane
+        is ``(-p, 0)`` (along -m1 wherever the rod is). On edge j it acts as ``f1 m1 + f2 m2 + ft t`` times the
+        length of [0, L] the edge stands for (the end edges: their inner half), half on each of its nodes (on
+        the inner node only for the end edges' outer halves, which lie outside the rod), like
+        ``der.distributed_force``.
+
+    Its load stiffness (it depends on positions through t and on theta through m1, m2) is in the Newton
+    matrix; it is not symmetric: a follower force does work that depends on the path (circulatory).
+
+    Returns
+    -------
+    FollowerForce, to pass in ``der.Scene(rod, loads=[...])``.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 20, axis=(1, 0, 0), director=(0, 0, 1)), 1.0, 1.0)
+    >>> scene = der.Scene(rod, loads=[der.follower_force((-1e-3, 0))], constraints=[der.clamp("start")])
+    """
+    d = np.asarray(density, dtype=float) if not isinstance(density, str) else None
+    if d is None or d.ndim != 1 or d.size not in (2, 3) or not np.all(np.isfinite(d)):
+        raise ValueError(f"der.follower_force: density must be (f1, f2) or (f1, f2, ft), finite numbers (force per "
+                         f"unit rest length along m1, m2 and t); got {density!r}")
+    return FollowerForce(tuple(float(v) for v in np.resize(np.append(d, [0.0] * (3 - d.size)), 3)))
+
+
 # ---------------------------------------------------------------------------------------------
 # kernels
 # ---------------------------------------------------------------------------------------------
@@ -314,6 +410,105 @@ def add_dead_torques(q, edge_nodes, edges, torques, order, fext, ab, kl, ku, per
             K[6, r] = dtt[r]
         edge_dofs(edge_nodes, j, dofs)
         full = np.empty(7, dtype=np.int64)
+        for r in range(6):
+            full[r] = dofs[r]
+        full[6] = 4 * j + 3
+        scatter_band(ab, kl, ku, perm, full, K, 1.0)
+
+
+@njit(cache=True)
+def add_follower_forces(ed, edge_nodes, q, density, w_first, w_second, order, fext, ab, kl, ku, perm):
+    """Follower force per length ``density`` = (f1, f2, ft) along (m1, m2, t) of every edge: edge j gives
+    ``w_first[j] f_j`` to its first node and ``w_second[j] f_j`` to its second, f_j = f1 m1 + f2 m2 + ft t.
+    With order >= 2 also the load stiffness -d fext/dq into the band: with the reference frame transported
+    with the edge, dm_i/de = -t m_i^T / |e| and dt/de = (I - t t^T) / |e|; dm1/dtheta = m2, dm2/dtheta = -m1.
+    ``ed`` is an ``edge_frames`` array (t, |e|, m1, m2 per edge)."""
+    f1, f2, ft = density[0], density[1], density[2]
+    dofs = np.empty(6, dtype=np.int64)
+    full = np.empty(7, dtype=np.int64)
+    K = np.zeros((7, 7))
+    for j in range(edge_nodes.shape[0]):
+        wa = w_first[j]
+        wb = w_second[j]
+        if wa == 0.0 and wb == 0.0:
+            continue
+        t = ed[j, 0:3]
+        le = ed[j, 3]
+        m1 = ed[j, 4:7]
+        m2 = ed[j, 7:10]
+        f = f1 * m1 + f2 * m2 + ft * t
+        a = 4 * edge_nodes[j, 0]
+        b = 4 * edge_nodes[j, 1]
+        for k in range(3):
+            fext[a + k] += wa * f[k]
+            fext[b + k] += wb * f[k]
+        if order < 2:
+            continue
+        fm = f1 * m1 + f2 * m2
+        D = np.empty((3, 3))      # d f / d e
+        for r in range(3):
+            for c in range(3):
+                D[r, c] = (-t[r] * fm[c] + ft * ((1.0 if r == c else 0.0) - t[r] * t[c])) / le
+        g = f1 * m2 - f2 * m1     # d f / d theta
+        for r in range(7):
+            for c in range(7):
+                K[r, c] = 0.0
+        # local DOFs [x_a, x_b, theta]; e = x_b - x_a; K = -d fext / d q
+        for r in range(3):
+            for c in range(3):
+                K[r, c] = wa * D[r, c]
+                K[r, 3 + c] = -wa * D[r, c]
+                K[3 + r, c] = wb * D[r, c]
+                K[3 + r, 3 + c] = -wb * D[r, c]
+            K[r, 6] = -wa * g[r]
+            K[3 + r, 6] = -wb * g[r]
+        edge_dofs(edge_nodes, j, dofs)
+        for r in range(6):
+            full[r] = dofs[r]
+        full[6] = 4 * j + 3
+        scatter_band(ab, kl, ku, perm, full, K, 1.0)
+
+
+@njit(cache=True)
+def add_follower_torques(ed, edge_nodes, edges, torques, order, fext, ab, kl, ku, perm):
+    """Follower torques ``torques[i]`` = (T1, T2, Tt), components along the current material frame (m1, m2, t)
+    of edge ``edges[i]``: Tt on theta and the couple +-u / |e| on the edge's nodes, u = T x t = T2 m1 - T1 m2.
+    With order >= 2 also the load stiffness -d fext/dq: d(u/|e|)/de = -(t u^T + u t^T) / |e|^2 (the material
+    directors move with the edge as dm_i/de = -t m_i^T / |e|), d(u/|e|)/dtheta = (T1 m1 + T2 m2) / |e|.
+    ``ed`` is an ``edge_frames`` array."""
+    dofs = np.empty(6, dtype=np.int64)
+    full = np.empty(7, dtype=np.int64)
+    K = np.zeros((7, 7))
+    for i in range(edges.shape[0]):
+        j = edges[i]
+        T1, T2, Tt = torques[i, 0], torques[i, 1], torques[i, 2]
+        t = ed[j, 0:3]
+        le = ed[j, 3]
+        m1 = ed[j, 4:7]
+        m2 = ed[j, 7:10]
+        u = T2 * m1 - T1 * m2
+        a = 4 * edge_nodes[j, 0]
+        b = 4 * edge_nodes[j, 1]
+        fext[4 * j + 3] += Tt
+        for k in range(3):
+            fext[b + k] += u[k] / le
+            fext[a + k] -= u[k] / le
+        if order < 2:
+            continue
+        g = (T1 * m1 + T2 * m2) / le
+        for r in range(7):
+            for c in range(7):
+                K[r, c] = 0.0
+        for r in range(3):
+            for c in range(3):
+                D = -(t[r] * u[c] + u[r] * t[c]) / (le * le)
+                K[3 + r, 3 + c] = -D
+                K[3 + r, c] = D
+                K[r, 3 + c] = D
+                K[r, c] = -D
+            K[3 + r, 6] = -g[r]
+            K[r, 6] = g[r]
+        edge_dofs(edge_nodes, j, dofs)
         for r in range(6):
             full[r] = dofs[r]
         full[6] = 4 * j + 3

@@ -17,14 +17,15 @@ from .energies.stretch import stretch_energy, stretch_gradient, stretch_hessian
 from .energies.twist import twist_energy, twist_gradient, twist_hessian
 from .geometry import add_transport_jacobian, edge_frames
 from .loads import (
-    DistributedForce, EndForce, EndTorque, PointForce, TwistingMoment, add_dead_torques, add_nodal_forces,
-    add_theta_moments,
+    DistributedForce, EndForce, EndTorque, FollowerForce, PointForce, PointTorque, TwistingMoment, add_dead_torques,
+    add_follower_forces, add_follower_torques, add_nodal_forces, add_theta_moments,
 )
 from .rod import Rod
 
 ENERGY_TERMS = ("stretch", "bend", "twist")
 # slots of plan.counters
-COUNTER_NAMES = ("stretch", "bend", "twist", "transport_jacobian", "nodal_forces", "theta_moments", "dead_torques")
+COUNTER_NAMES = ("stretch", "bend", "twist", "transport_jacobian", "nodal_forces", "theta_moments", "dead_torques",
+                 "follower_forces", "follower_torques")
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,9 +39,13 @@ class Scene:
         Any of "stretch", "bend", "twist" (default: all three).
     loads : sequence
         ``der.point_force``, ``der.end_force``, ``der.distributed_force``, ``der.end_torque``,
-        ``der.twisting_moment`` records.
+        ``der.twisting_moment``, ``der.point_torque``, ``der.follower_force`` records.
     constraints : sequence
-        ``der.clamp``, ``der.pin``, ``der.fix_theta`` records.
+        ``der.clamp``, ``der.hinge``, ``der.roller``, ``der.pin``, ``der.fix_theta`` records.
+    contacts : sequence
+        Contact terms (issue 14): ``der.self_contact(radius)``, ``der.plane(point, normal)``,
+        ``der.sphere(centre, R)``, ``der.cylinder(point, axis, R)`` (registered in ``der.terms``; their energy is
+        added to the rod's). A scene without them loads no contact code and solves exactly as before.
 
     Everything is checked here, before any work: an unknown load or constraint, a node out of range, an end
     load on a ring, conflicting pins raise a ValueError (or TypeError) naming the argument. Loads act in the
@@ -60,6 +65,7 @@ class Scene:
     energies: tuple = ENERGY_TERMS
     loads: tuple = ()
     constraints: tuple = ()
+    contacts: tuple = ()
 
     def __post_init__(self):
         if not isinstance(self.rod, Rod):
@@ -75,6 +81,12 @@ class Scene:
         for load in self.loads:
             _check_load(self.rod, load)
         _constraints.validate(self.rod, self.constraints)
+        object.__setattr__(self, "contacts", tuple(self.contacts))
+        if self.contacts:
+            from .terms import check_term
+
+            for term in self.contacts:
+                check_term(term, self)
 
     @property
     def fixed(self):
@@ -104,9 +116,21 @@ def _check_load(rod, load):
             validate.vector3(load.torque, "der.end_torque: torque: dead end torque")
     elif isinstance(load, TwistingMoment):
         validate.finite_number(load.density, "der.twisting_moment: density")
+    elif isinstance(load, PointTorque):
+        edge = validate.integer(load.edge, "der.point_torque: edge", "an integer edge index")
+        if not -rod.n_edges <= edge < rod.n_edges:
+            raise ValueError(f"point torque on edge {edge}: out of range for {rod.n_edges} edges "
+                             f"(allowed: {-rod.n_edges} ... {rod.n_edges - 1})")
+        if load.follower and np.ndim(load.torque) == 0:
+            validate.finite_number(load.torque, "der.point_torque: torque (follower=True: a scalar)")
+        else:
+            validate.vector3(load.torque, "der.point_torque: torque")
+    elif isinstance(load, FollowerForce):
+        validate.vector3(load.density, "der.follower_force: density")
     else:
         raise ValueError(f"der.Scene: loads: unknown load {load!r}; use der.point_force, der.end_force, "
-                         "der.distributed_force, der.end_torque or der.twisting_moment")
+                         "der.distributed_force, der.end_torque, der.twisting_moment, der.point_torque or "
+                         "der.follower_force")
 
 
 Plan = namedtuple("Plan", [
@@ -116,6 +140,8 @@ Plan = namedtuple("Plan", [
     "has_nodal", "nodal_forces", "has_theta", "theta_moments",
     "has_dead_torques", "torque_edges", "torque_vectors",
     "counters",
+    "has_follower", "follower_density", "follower_first", "follower_second",
+    "has_follower_torques", "follower_torque_edges", "follower_torque_vectors",
 ])
 
 
@@ -126,6 +152,9 @@ def make_plan(scene, k_stretch):
     theta = np.zeros(rod.n_edges)
     has_nodal = has_theta = False
     t_edges, t_vecs = [], []
+    follower = np.zeros(3)
+    has_follower = False
+    ft_edges, ft_vecs = [], []
     node_len = rod.node_weights()
     for load in scene.loads:
         if isinstance(load, PointForce):
@@ -150,6 +179,27 @@ def make_plan(scene, k_stretch):
         elif isinstance(load, TwistingMoment):
             theta += load.density * rod.edge_weights()
             has_theta = True
+        elif isinstance(load, PointTorque):
+            j = load.edge % rod.n_edges
+            if load.follower and np.ndim(load.torque) == 1:
+                ft_edges.append(j)
+                ft_vecs.append(load.torque)
+            elif load.follower:
+                theta[j] += load.torque
+                has_theta = True
+            else:
+                t_edges.append(j)
+                t_vecs.append(load.torque)
+        elif isinstance(load, FollowerForce):
+            follower += np.asarray(load.density, float)
+            has_follower = True
+    # follower forces: half of each edge's rest length to each of its nodes, none to the outer nodes of an open
+    # rod (the outer halves of the end edges lie outside [0, L]): the lumping of Rod.node_weights
+    w_first = 0.5 * rod.l_bar.copy()
+    w_second = 0.5 * rod.l_bar.copy()
+    if not rod.closed:
+        w_first[0] = 0.0
+        w_second[-1] = 0.0
     return Plan(
         "stretch" in scene.energies, "bend" in scene.energies, "twist" in scene.energies,
         rod.edge_nodes, rod.vertex_nodes, rod.vertex_edges,
@@ -159,6 +209,8 @@ def make_plan(scene, k_stretch):
         has_nodal, nodal, has_theta, theta,
         len(t_edges) > 0, np.array(t_edges, dtype=np.int64), np.array(t_vecs, dtype=float).reshape(-1, 3),
         np.zeros(len(COUNTER_NAMES), dtype=np.int64),
+        has_follower, follower, w_first, w_second,
+        len(ft_edges) > 0, np.array(ft_edges, dtype=np.int64), np.array(ft_vecs, dtype=float).reshape(-1, 3),
     )
 
 
@@ -223,4 +275,12 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
     if plan.has_dead_torques:
         plan.counters[6] += 1
         add_dead_torques(q, plan.edge_nodes, plan.torque_edges, plan.torque_vectors, order, fext, ab, kl, ku, perm)
+    if plan.has_follower:
+        plan.counters[7] += 1
+        add_follower_forces(edge_frames(q, plan.edge_nodes, d1), plan.edge_nodes, q, plan.follower_density,
+                            plan.follower_first, plan.follower_second, order, fext, ab, kl, ku, perm)
+    if plan.has_follower_torques:
+        plan.counters[8] += 1
+        add_follower_torques(edge_frames(q, plan.edge_nodes, d1), plan.edge_nodes, plan.follower_torque_edges,
+                             plan.follower_torque_vectors, order, fext, ab, kl, ku, perm)
     return energy

@@ -34,24 +34,31 @@ def _dispatchers():
                 yield obj
 
 
+# the kernels a solve calls from Python: numba compiles (or loads) exactly these, each with the kernels it
+# calls inlined into it (numba's cache index tracks only a kernel's own source file, so an inlined callee's
+# stale index means nothing: it is never loaded on its own)
+ENTRY_KERNELS = (("der.scene", "evaluate"), ("der.geometry", "transport_frames"), ("der.geometry", "edge_frames"),
+                 ("der.diagnostics", "_edge_forces"), ("der.solvers.explicit", "_fire_run"))
+
+
 def cache_is_cold():
     """Whether the next solve would compile der's kernels rather than load them from numba's on-disk cache.
 
-    Cold when the central kernel (``der.scene.evaluate``) has no cached version, or when any kernel's cache
-    index is stale (its source file changed since it was compiled). Kernels compiled in this process count
-    as warm. Never raises: if numba's cache cannot be inspected, it answers True (the message is then shown
-    once, possibly needlessly).
+    Cold when one of the kernels a solve calls from Python (``ENTRY_KERNELS``, the central one
+    ``der.scene.evaluate`` among them) has no cached version or a stale one (its source file changed since it
+    was compiled). Kernels compiled in this process count as warm. Never raises: if numba's cache cannot be
+    inspected, it answers True (the message is then shown once, possibly needlessly).
     """
+    import importlib
+
     try:
-        for disp in _dispatchers():
+        for module, name in ENTRY_KERNELS:
+            disp = getattr(importlib.import_module(module), name)
             if disp.signatures:
                 continue
             cache_file = disp._cache._cache_file
-            exists = os.path.exists(cache_file._index_path)
-            if exists and not cache_file._load_index():
-                return True                      # stale: the source changed
-            if not exists and disp.__name__ == "evaluate" and disp.__module__ == "der.scene":
-                return True                      # never compiled here
+            if not os.path.exists(cache_file._index_path) or not cache_file._load_index():
+                return True                      # never compiled here, or the source changed
         return False
     except Exception:
         return True
@@ -103,6 +110,17 @@ def _run_kernels():
         # certification) compiles too
         solve(scene, solver=solver, tol=1e-300, raise_on_failure=False, stability=False, max_steps=20000,
               max_iterations=60, progress=False)
+    # end supports (their banded change of variables), point torques and follower forces (issue 13)
+    from .constraints import hinge
+    from .loads import follower_force, point_torque
+
+    # (an extensible rod: the explicit solver's length projection does not take coupled support links)
+    supported = Scene(rod.with_stiffness(EA=1e4), loads=[follower_force((1e-4, 0.0)), point_torque(2, [0, 1e-4, 0]),
+                                  point_torque(3, [1e-4, 0, 0], follower=True)],
+                      constraints=[clamp("start"), hinge("end")])
+    for solver in ("implicit", "explicit"):
+        solve(supported, solver=solver, tol=1e-6, raise_on_failure=False, stability=True, max_steps=2000,
+              progress=False)
     ring = rod_from_shape(shapes.ring(1.0, 5), 1.0, 1.5, EA=100.0)
     res = solve(Scene(ring, loads=[twisting_moment(1e-3)]), tol=1e-6, raise_on_failure=False, progress=False)
     dg.profile(ring, res.state)

@@ -21,16 +21,22 @@ import numpy as np
 import der
 from der import closed_forms as cf
 from der import diagnostics as dg
-from der.cli import scenario_main
+from der.cli import POSITIVE, Range, scenario_main, validator
 
 PARAMETERS = [
-    ("A1", 1.0, float, "bending stiffness"),
-    ("A2", 1.0 / 0.67, float, "twisting stiffness"),
-    ("kappa0", 1.0, float, "natural curvature"),
-    ("omega0", 0.6, float, "natural torsion (> 0 right-handed, < 0 left-handed)"),
-    ("P", 1e-5, float, "tangential end force F_t(l) (small: the closed form is linear)"),
-    ("T", 2e-5, float, "follower end torque about the end tangent (positive over-twists)"),
-    ("symmetric", 0, int, "1: solve at +load and -load and compare the odd part (removes the O(load^2) error)"),
+    ("A1", 1.0, float, "bending stiffness", POSITIVE),
+    ("A2", 1.0 / 0.67, float, "twisting stiffness", POSITIVE),
+    ("kappa0", 1.0, float, "natural curvature", POSITIVE),
+    ("omega0", 0.6, float, "natural torsion (> 0 right-handed, < 0 left-handed)",
+     Range(lambda p: -100 * p.kappa0, lambda p: 100 * p.kappa0, nonzero=True,
+           why="|omega0| up to 100 kappa0, and not 0: a planar ring has no axis to pull along")),
+    ("P", 1e-5, float, "tangential end force F_t(l) (small: the closed form is linear)",
+     Range(lambda p: -p.A1 * p.kappa0 ** 2, lambda p: p.A1 * p.kappa0 ** 2,
+           why="|P| <= A1 kappa0^2: the closed form is linear in the loads")),
+    ("T", 2e-5, float, "follower end torque about the end tangent (positive over-twists)",
+     Range(lambda p: -p.A1 * p.kappa0, lambda p: p.A1 * p.kappa0,
+           why="|T| <= A1 kappa0: the closed form is linear in the loads")),
+    ("symmetric", False, bool, "solve at +load and -load and compare the odd part (removes the O(load^2) error)"),
 ]
 KEYS = ("Mn", "Mb", "Mt", "Ft", "Fn", "Fb", "dalpha", "dkappa", "domega")
 HEADLINE = ("Mn", "Mb", "Mt", "Ft", "Fb", "dalpha", "dkappa", "domega")
@@ -83,16 +89,11 @@ def run(p, solver):
 
 
 def validate(p):
-    for name in ("A1", "A2", "kappa0"):
-        if getattr(p, name) <= 0:
-            raise ValueError(f"--{name} must be > 0; got {getattr(p, name)}")
-    if p.omega0 == 0:
-        raise ValueError("--omega0 must be non-zero (a planar ring has no axis to pull along)")
     if p.P == 0 and p.T == 0:
         raise ValueError("--P and --T cannot both be zero (the error is relative to the response)")
 
 
-run.validate = validate
+run.validate = validator(PARAMETERS, validate)
 
 if __name__ == "__main__":
     sys.exit(scenario_main("helix_torque", __doc__.splitlines()[0], PARAMETERS, run, n_default=200))

@@ -1,6 +1,6 @@
 """Elongation and winding of a helix (paper Section 6.3.2, Eqs. 72-81, Figs. 1-2), with the corrected Eq. 78.
 
-A helix of ``turns`` turns (kappa0 = 1, omega0 = lam, A2 = 1, A1 = A) deformed into a uniform helix of axial
+A helix of ``turns`` turns (kappa0 = 1, omega0 = lam, A2 = 1, A1 = A, the paper's A = A1/A2) deformed into a uniform helix of axial
 elongation eta and overtwist phi. Two controls:
 
 * displacement (``--eta --phi``): both ends clamped on the deformed uniform helix (positions and frames); the
@@ -13,7 +13,7 @@ so F_t = P S1 (not P / S1 as in Eq. 78, S1 = t.e3), and P0 = P/(A2 omega0^2) = c
 [c eta - 1 - A eta (c - 1/r)], c = 1 + phi, r = sqrt(1 + lam^2 (1 - eta^2)); the paper's Eq. 81 is S1^2 times it.
 ``--figure 1`` / ``--figure 2`` regenerate the paper's Figures 1 and 2 (paper, corrected and simulated).
 
-    python scenarios/helix_winding.py [--A 0.67] [--lam 0.6] [--turns 3] [--eta 1.2] [--phi 0.1] [--P0 X]
+    python scenarios/helix_winding.py [--A1 0.67] [--lam 0.6] [--turns 3] [--eta 1.2] [--phi 0.1] [--P0 X]
                                       [--figure 1|2] [--png PATH]
 """
 import sys
@@ -24,24 +24,27 @@ from scipy.optimize import brentq
 import der
 from der import closed_forms as cf
 from der import diagnostics as dg
-from der.cli import scenario_main
+from der.cli import Range, scenario_main, validator
 from der.geometry import reference_twist_angle, tangents
 from der.rod import RodState, frenet_frame_of_shape
 
 PARAMETERS = [
-    ("A", 0.67, float, "A1/A2 (A2 = 1)"),
-    ("lam", 0.6, float, "omega0/kappa0 (kappa0 = 1)"),
-    ("turns", 1.0, float, "number of turns of the rest helix"),
+    ("A1", 0.67, float, "bending stiffness A1 in units of A2 = 1, i.e. the paper's A = A1/A2 (--A: deprecated)",
+     Range(1e-3, 1e3)),
+    ("lam", 0.6, float, "omega0/kappa0 (kappa0 = 1)", Range(1e-2, 1e2)),
+    ("turns", 1.0, float, "number of turns of the rest helix", Range(0.0, 100.0, open_lo=True)),
     ("eta", 1.2, float, "axial elongation (displacement control)"),
-    ("phi", 0.1, float, "overtwist (winding held)"),
-    ("P0", None, float, "axial force P/(A2 omega0^2): force control instead of --eta"),
-    ("figure", 0, int, "1 or 2: regenerate the paper's Figure 1 or 2 instead of one point"),
+    ("phi", 0.1, float, "overtwist (winding held)",
+     Range(-1.0, 1.0, open_lo=True, why="the winding ratio 1 + phi in (0, 2]; the paper's Figure 2 spans +-0.5")),
+    ("P0", None, float, "axial force P/(A2 omega0^2): force control instead of --eta",
+     Range(-100.0, 100.0, why="the paper's Figure 2 spans 0.1 to 10")),
+    ("figure", 0, int, "1 or 2: regenerate the paper's Figure 1 or 2 instead of one point", Range(0, 2)),
     ("png", None, str, "with --figure: write the figure to this PNG (needs matplotlib)"),
 ]
 
 
 def rest_rod(p):
-    return der.rod_from_shape(der.shapes.helix(1.0, p.lam, p.turns, p.n), p.A, 1.0, EA=getattr(p, "EA", None))
+    return der.rod_from_shape(der.shapes.helix(1.0, p.lam, p.turns, p.n), p.A1, 1.0, EA=getattr(p, "EA", None))
 
 
 def deformed_state(rod, eta, phi, lam):
@@ -89,7 +92,7 @@ def solve_at(p, solver, rod, eta, phi):
 
 def force_control(p, solver, rod, P0, phi):
     """Secant iteration on eta until the measured axial force equals P0 (the winding phi held)."""
-    guess = cf.winding_eta(P0, phi, p.lam, p.A)
+    guess = cf.winding_eta(P0, phi, p.lam, p.A1)
     e0 = guess if np.isfinite(guess) else 1.0
     e1 = e0 * (1 + 1e-3)
     f0 = solve_at(p, solver, rod, e0, phi)[1]["P0"] - P0
@@ -105,16 +108,16 @@ def force_control(p, solver, rod, P0, phi):
 def point(p, solver, rod):
     if p.P0 is None:
         res, m = solve_at(p, solver, rod, p.eta, p.phi)
-        ref = np.array([cf.winding_P0(p.eta, p.phi, p.lam, p.A), cf.winding_T0(p.eta, p.phi, p.lam, p.A)])
+        ref = np.array([cf.winding_P0(p.eta, p.phi, p.lam, p.A1), cf.winding_T0(p.eta, p.phi, p.lam, p.A1)])
         sim = np.array([m["P0"], m["T0"]])
         return {"control": "displacement", "eta": p.eta, "phi": p.phi, **m,
                 "P0_reference": ref[0], "T0_reference": ref[1],
-                "P0_paper": float(cf.paper_winding_P0(p.eta, p.phi, p.lam, p.A)),
+                "P0_paper": float(cf.paper_winding_P0(p.eta, p.phi, p.lam, p.A1)),
                 "error": float(np.linalg.norm(sim - ref) / np.linalg.norm(ref)),
-                "paper_error": float(abs(m["P0"] - cf.paper_winding_P0(p.eta, p.phi, p.lam, p.A)) / abs(ref[0]))}
+                "paper_error": float(abs(m["P0"] - cf.paper_winding_P0(p.eta, p.phi, p.lam, p.A1)) / abs(ref[0]))}
     eta, res, m = force_control(p, solver, rod, p.P0, p.phi)
-    eta_ref = cf.winding_eta(p.P0, p.phi, p.lam, p.A)
-    eta_paper = cf.winding_eta(p.P0, p.phi, p.lam, p.A, corrected=False)
+    eta_ref = cf.winding_eta(p.P0, p.phi, p.lam, p.A1)
+    eta_paper = cf.winding_eta(p.P0, p.phi, p.lam, p.A1, corrected=False)
     return {"control": "force", "eta": eta, "phi": p.phi, **m, "P0": p.P0, "eta_reference": eta_ref,
             "eta_paper": eta_paper, "error": abs(eta - eta_ref) / abs(eta_ref),
             "paper_error": abs(eta - eta_paper) / abs(eta_ref) if np.isfinite(eta_paper) else None}
@@ -130,7 +133,7 @@ def figure(p, solver, rod_for):
             eta = np.linspace(0.0, 0.995 * em, 300)
             curves.append({"lam": lam, "eta": eta, "P0_corrected": cf.winding_P0(eta, 0.0, lam, A),
                            "P0_paper": cf.paper_winding_P0(eta, 0.0, lam, A)})
-            q = _with(p, lam=lam, A=A)
+            q = _with(p, lam=lam, A1=A)
             rod = rod_for(q)
             for e in np.linspace(0.6, 0.9 * em, 6):
                 _, m = solve_at(q, solver, rod, e, 0.0)
@@ -140,7 +143,7 @@ def figure(p, solver, rod_for):
                                "error": abs(m["P0"] - ref) / max(abs(ref), 1e-2)})
     else:
         lam = 0.6
-        q = _with(p, lam=lam, A=A)
+        q = _with(p, lam=lam, A1=A)
         rod = rod_for(q)
         phis = np.linspace(-0.5, 0.5, 101)
         for P0 in (0.1, 1.0, 10.0):
@@ -173,7 +176,7 @@ def _plot(fig_no, curves, points, path):
     plt = pyplot("helix_winding.py")
     if plt is None:
         return
-    fig, ax = plt.subplots(figsize=(7, 5))
+    fig, ax = plt.subplots(figsize=(9.5, 5))
     for i, c in enumerate(curves):
         col = f"C{i}"
         if fig_no == 1:
@@ -197,7 +200,8 @@ def _plot(fig_no, curves, points, path):
     else:
         ax.set(xlabel=r"overtwist $\varphi$", ylabel=r"axial elongation $\eta$",
                title=r"Figure 2: $A = 0.67$, $\lambda = 0.6$")
-    ax.legend(fontsize=7, ncol=3)
+    # outside the axes: inside, it covered the P0 = 0.1 curves and the phi = 0.2 point of Figure 2
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
 
@@ -214,10 +218,6 @@ def run(p, solver):
 
 
 def validate(p):
-    if p.A <= 0 or p.lam <= 0 or p.turns <= 0:
-        raise ValueError(f"--A, --lam and --turns must be > 0; got {p.A}, {p.lam}, {p.turns}")
-    if not 1 + p.phi > 0:
-        raise ValueError(f"--phi must be > -1 (1 + phi is the winding ratio); got {p.phi}")
     em = float(cf.winding_eta_max(p.lam))
     if p.P0 is None and not 0 < p.eta < em:
         raise ValueError(f"--eta must be in (0, eta_max = sqrt(1 + 1/lam^2) = {em:.6g}); got {p.eta}")
@@ -225,11 +225,15 @@ def validate(p):
         raise ValueError(f"--figure must be 1 or 2; got {p.figure}")
     if p.png and not p.figure:
         raise ValueError("--png needs --figure 1 or 2")
+    if p.png:
+        from der.plotting import require_matplotlib
+        require_matplotlib("--png")
     if p.n < 12 * p.turns:
         raise ValueError(f"--n must be >= 12 per turn ({int(12 * p.turns)} for {p.turns} turns); got {p.n}")
 
 
-run.validate = validate
+run.validate = validator(PARAMETERS, validate)
 
 if __name__ == "__main__":
-    sys.exit(scenario_main("helix_winding", __doc__.splitlines()[0], PARAMETERS, run, n_default=200))
+    sys.exit(scenario_main("helix_winding", __doc__.splitlines()[0], PARAMETERS, run, n_default=200,
+                           aliases={"--A": "--A1"}))

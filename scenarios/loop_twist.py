@@ -18,16 +18,20 @@ import numpy as np
 import der
 from der import closed_forms as cf
 from der import diagnostics as dg
-from der.cli import scenario_main
+from der.cli import POSITIVE, Range, scenario_main, validator
 
 PARAMETERS = [
-    ("A1", 1.0, float, "bending stiffness"),
-    ("A2", 1.0 / 0.67, float, "twisting stiffness (A1/A2 = 0.67, DNA)"),
-    ("a0", 1.0, float, "radius of the ring"),
-    ("mt", 0.5, float, "twisting moment per unit length about the tangent (fold at A1/a0^2)"),
-    ("sweep", 0, int, "continuation from 0 to --mt in this many steps (0: a single solve)"),
-    ("perturb", 0.0, float, "out-of-plane perturbation (fraction of a0) applied at the start of every step"),
-    ("locate", 0, int, "1: after the sweep, bisect on m_t between the last stable and first unstable step"),
+    ("A1", 1.0, float, "bending stiffness", POSITIVE),
+    ("A2", 1.0 / 0.67, float, "twisting stiffness (A1/A2 = 0.67, DNA)", POSITIVE),
+    ("a0", 1.0, float, "radius of the ring", POSITIVE),
+    ("mt", 0.5, float, "twisting moment per unit length about the tangent (fold at A1/a0^2)",
+     Range(lambda p: -2 * p.A1 / p.a0 ** 2, lambda p: 2 * p.A1 / p.a0 ** 2, nonzero=True,
+           why="up to twice the fold A1/a0^2")),
+    ("sweep", 0, int, "number of continuation steps K, at m_t = mt/K, 2 mt/K, ..., mt (0: a single solve)",
+     Range(0, 10000)),
+    ("perturb", 0.0, float, "out-of-plane perturbation (fraction of a0) applied at the start of every step",
+     Range(0.0, 0.5, open_hi=True)),
+    ("locate", False, bool, "after the sweep, bisect on m_t between the last stable and first unstable step"),
 ]
 
 
@@ -153,19 +157,12 @@ def _verdict(sweep, fold):
 
 
 def validate(p):
-    for name in ("A1", "A2", "a0"):
-        if getattr(p, name) <= 0:
-            raise ValueError(f"--{name} must be > 0; got {getattr(p, name)}")
-    if p.sweep < 0:
-        raise ValueError(f"--sweep must be >= 0; got {p.sweep}")
-    if p.mt == 0:
-        raise ValueError("--mt must be non-zero")
     if not p.sweep and abs(p.mt) > cf.loop_fold(p.A1, p.a0):
         raise ValueError(f"--mt = {p.mt} is past the fold A1/a0^2 = {cf.loop_fold(p.A1, p.a0):.6g}: no planar "
                          "equilibrium exists; use --sweep to continue up to and past it")
 
 
-run.validate = validate
+run.validate = validator(PARAMETERS, validate)
 
 if __name__ == "__main__":
     sys.exit(scenario_main("loop_twist", __doc__.splitlines()[0], PARAMETERS, run, n_default=200, n_min=3))

@@ -18,16 +18,19 @@ import numpy as np
 import der
 from der import closed_forms as cf
 from der import diagnostics as dg
-from der.cli import scenario_main
+from der.cli import POSITIVE, Range, scenario_main, validator
 
 PARAMETERS = [
-    ("A1", 1.0, float, "bending stiffness"),
-    ("A2", 1.0 / 0.67, float, "twisting stiffness (A1/A2 = 0.67, DNA)"),
-    ("a0", 1.0, float, "radius of the rest arc"),
-    ("L", 3.0, float, "length of the arc (< 2 pi a0)"),
-    ("T", 1e-3, float, "end torque about the end tangent (small: the closed form is linear in T)"),
+    ("A1", 1.0, float, "bending stiffness", POSITIVE),
+    ("A2", 1.0 / 0.67, float, "twisting stiffness (A1/A2 = 0.67, DNA)", POSITIVE),
+    ("a0", 1.0, float, "radius of the rest arc", POSITIVE),
+    ("L", 3.0, float, "length of the arc (< 2 pi a0)",
+     Range(0.0, lambda p: 2 * np.pi * p.a0, open_lo=True, open_hi=True, why="a disconnected ring, 0 < L < 2 pi a0")),
+    ("T", 1e-3, float, "end torque about the end tangent (small: the closed form is linear in T)",
+     Range(lambda p: -p.A1 / p.a0, lambda p: p.A1 / p.a0, nonzero=True,
+           why="|T| <= A1/a0: the closed form is linear in T, and the error is relative to the response")),
     ("torque", "dead", str, "dead (fixed vector T t0(L)) or follower (T about the current end tangent)"),
-    ("symmetric", 0, int, "1: solve at +T and -T and compare the odd part (removes the O(T^2) error)"),
+    ("symmetric", False, bool, "solve at +T and -T and compare the odd part (removes the O(T^2) error)"),
 ]
 
 
@@ -77,18 +80,11 @@ def run(p, solver):
 
 
 def validate(p):
-    for name in ("A1", "A2", "a0", "L"):
-        if getattr(p, name) <= 0:
-            raise ValueError(f"--{name} must be > 0; got {getattr(p, name)}")
-    if p.L >= 2 * np.pi * p.a0:
-        raise ValueError(f"--L must be < 2 pi a0 = {2 * np.pi * p.a0:.6g} (a disconnected ring); got {p.L}")
     if p.torque not in ("dead", "follower"):
         raise ValueError(f"--torque must be 'dead' or 'follower'; got {p.torque!r}")
-    if p.T == 0:
-        raise ValueError("--T must be non-zero (the error is relative to the response)")
 
 
-run.validate = validate
+run.validate = validator(PARAMETERS, validate)
 
 if __name__ == "__main__":
     sys.exit(scenario_main("ring_torsion", __doc__.splitlines()[0], PARAMETERS, run, n_default=200))

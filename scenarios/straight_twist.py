@@ -15,13 +15,15 @@ import sys
 import numpy as np
 
 import der
-from der.cli import scenario_main
+from der.cli import POSITIVE, Range, scenario_main, validator
 
 PARAMETERS = [
-    ("L", 1.0, float, "rod length"),
-    ("A1", 1.0, float, "bending stiffness"),
-    ("A2", 1.5, float, "twisting stiffness"),
-    ("T", 0.5, float, "end torque about the axis (positive over-twists)"),
+    ("L", 1.0, float, "rod length", POSITIVE),
+    ("A1", 1.0, float, "bending stiffness", POSITIVE),
+    ("A2", 1.5, float, "twisting stiffness", POSITIVE),
+    ("T", 0.5, float, "end torque about the axis (positive over-twists)",
+     Range(lambda p: -20 * np.pi * p.A2 / p.L, lambda p: 20 * np.pi * p.A2 / p.L,
+           why="an end twist T L / A2 of at most 10 turns")),
 ]
 
 
@@ -43,13 +45,7 @@ def run(p, solver):
     }
 
 
-def validate(p):
-    for name in ("L", "A1", "A2"):
-        if getattr(p, name) <= 0:
-            raise ValueError(f"--{name} must be > 0; got {getattr(p, name)}")
-
-
-run.validate = validate
+run.validate = validator(PARAMETERS)
 
 if __name__ == "__main__":
     sys.exit(scenario_main("straight_twist", __doc__.splitlines()[0], PARAMETERS, run, n_default=50,

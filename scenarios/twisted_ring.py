@@ -11,7 +11,7 @@ its plane, and the stability of the equilibrium.
 Naturally straight ring: the planar ring with uniform twist is an equilibrium for every twist and stable up
 to Michell's threshold twist = 2 pi sqrt(3) A1 / A2 (Michell 1889, Zajac 1962). ``--sweep K`` continues from
 twist / K to twist in K steps, locates the sign change of the lowest stiffness eigenvalue and bisects it
-(``--locate 1``, default) to 1e-5. With ``--perturb EPS`` every step starts from the previous state bent out
+(``--locate``, default; ``--no-locate`` interpolates) to 1e-5. With ``--perturb EPS`` every step starts from the previous state bent out
 of plane by EPS a0, so that past the threshold the ring writhes (Tw turns into Wr at constant Lk).
 
 Naturally curved ring: twisting the cross-section away from the ring's normal costs bending energy (the
@@ -19,7 +19,7 @@ paper's term -2 A1 kappa kappa0 cos(alpha), Eq. 17), so the weld's twist stays n
 spreading, the ring leaves the plane at once, and the sweep finds where that branch stops being stable.
 
     python scenarios/twisted_ring.py [--A1 1] [--A2 1.4925] [--a0 1] [--kappa0 1/a0] [--twist RAD]
-                                     [--sweep K] [--perturb EPS] [--locate 1] [--png PATH]
+                                     [--sweep K] [--perturb EPS] [--no-locate] [--png PATH]
 """
 import sys
 
@@ -28,18 +28,24 @@ import numpy as np
 import der
 from der import closed_forms as cf
 from der import diagnostics as dg
-from der.cli import scenario_main
+from der.cli import POSITIVE, Range, scenario_main, validator
 
 PARAMETERS = [
-    ("A1", 1.0, float, "bending stiffness"),
-    ("A2", 1.0 / 0.67, float, "twisting stiffness (A1/A2 = 0.67, DNA)"),
-    ("a0", 1.0, float, "radius of the ring (L = 2 pi a0)"),
-    ("kappa0", None, float, "natural curvature: 0 (naturally straight) or 1/a0 (naturally circular, default)"),
+    ("A1", 1.0, float, "bending stiffness", POSITIVE),
+    ("A2", 1.0 / 0.67, float, "twisting stiffness (A1/A2 = 0.67, DNA)", POSITIVE),
+    ("a0", 1.0, float, "radius of the ring (L = 2 pi a0)", POSITIVE),
+    ("kappa0", None, float, "natural curvature: 0 (naturally straight) or 1/a0 (naturally circular; default: 1/a0)",
+     Range(0.0, lambda p: 100.0 / p.a0, why="0 (naturally straight) up to 100/a0")),
     ("twist", None, float, "imposed twist in radians, the weld rotation (extra linking number x 2 pi); default: "
-     "1.5 x Michell's threshold for kappa0 = 0, 1.5 pi (Lk = 3/4) otherwise"),
-    ("sweep", 0, int, "continuation from twist/K to twist in this many steps (0: a single solve)"),
-    ("perturb", 0.0, float, "out-of-plane perturbation (fraction of a0) applied at the start of every step"),
-    ("locate", 1, int, "1: bisect the stability threshold found by the sweep; 0: interpolate it"),
+     "1.5 x Michell's threshold for kappa0 = 0, 1.5 pi (Lk = 3/4) otherwise",
+     Range(-20 * np.pi, 20 * np.pi, why="an extra linking number of at most 10 turns")),
+    ("sweep", 0, int, "number of continuation steps K, at twist/K, 2 twist/K, ..., twist (0: a single solve)",
+     Range(0, 10000)),
+    ("perturb", 0.0, float, "out-of-plane perturbation (fraction of a0) applied at the start of every step",
+     Range(0.0, 0.5, open_hi=True)),
+    ("radius", None, float, "rod radius r for self-contact (issue 14): strands stay 2r apart and never pass through "
+     "each other (default: no contact)", Range(0.0, lambda p: 0.5 * p.a0, open_lo=True, why="0 < r < a0/2")),
+    ("locate", True, bool, "bisect the stability threshold found by the sweep (--no-locate: interpolate it)"),
     ("png", None, str, "write a picture of the final ring (with --sweep: four states along it) to this PNG"),
 ]
 
@@ -68,6 +74,11 @@ def start_state(rod, state, twist_from, twist_to, eps, a0):
     return rod.displaced(state, dx, dtheta)
 
 
+def contacts(p):
+    """The contact terms of the scene: self-contact of radius --radius, or none."""
+    return [der.self_contact(p.radius)] if p.radius else []
+
+
 def observe(rod, result, twist, p):
     st = result.state
     lk, tw, wr = dg.linking_number(rod, st)
@@ -82,7 +93,18 @@ def observe(rod, result, twist, p):
         "twist_strain_spread": float((strain.max() - strain.min()) * p.a0),
         "energy": float(sum(result.energy.values())) if result.energy else None,
         "min_eigenvalue": result.min_eigenvalue, "stable": result.stable,
+        "min_distance": _min_distance(result), "contacts": _n_contacts(result),
     }
+
+
+def _min_distance(result):
+    c = getattr(result, "contact", None)
+    return None if not c else c.get("min_distance")
+
+
+def _n_contacts(result):
+    c = getattr(result, "contact", None)
+    return 0 if not c else int(sum(t.get("n_contacts", 0) for t in c.get("terms", [])))
 
 
 def default_twist(p):
@@ -99,7 +121,7 @@ def run(p, solver):
     sweep, states = [], []
     for twist in steps:
         rod = base.with_imposed_twist(twist)
-        scene = der.Scene(rod)
+        scene = der.Scene(rod, contacts=contacts(p))
         result = solver.solve(scene, state=start_state(rod, state, welded, twist, p.perturb, p.a0))
         sweep.append(observe(rod, result, float(twist), p))
         states.append(result.state)
@@ -108,19 +130,24 @@ def run(p, solver):
         state, welded = result.state, float(twist)
     last = sweep[-1]
     out = {k: last[k] for k in ("twist_total", "writhe", "linking_number", "lk_error", "out_of_plane",
-                                "twist_strain_spread", "min_eigenvalue", "stable")}
+                                "twist_strain_spread", "min_eigenvalue", "stable", "energy", "min_distance",
+                                "contacts")}
+    out["radius"] = p.radius
     out["kappa0"] = kappa0
     out["lk_error_max"] = max(s["lk_error"] for s in sweep)
     michell = cf.michell_twist(p.A1, p.A2)
     out["michell_twist"] = michell
     out.update(_threshold(p, solver, base, sweep, states))
-    # der has no self-contact: a writhing ring can pass through itself, which changes Lk by 2
+    # without --radius there is no self-contact: a writhing ring can pass through itself, which changes Lk by 2
     passages = [s for s in sweep if s["lk_error"] > 0.5]
     out["strand_passage_at"] = passages[0]["twist"] if passages else None
     if passages:
         jump = passages[0]["linking_number"] - passages[0]["twist"] / (2 * np.pi)
         out["note"] = (f"the ring passed through itself at twist {passages[0]['twist']:.6g} (Lk changed by "
-                       f"{jump:+.3g}): der has no self-contact, so states beyond that are not those of a real rod")
+                       f"{jump:+.3g}): without --radius there is no self-contact, so states beyond that are not those of a "
+                       "real rod")
+        # the run contradicts its own check (Lk conserved): exit 3 with this reason (der.cli)
+        out["check_failed"] = out["note"]
     if passages:
         out["error"] = out["lk_error_max"]
         out["reference"] = "conservation of the linking number, Lk = twist / 2 pi (absolute error, turns)"
@@ -151,7 +178,8 @@ def _picture(base, items, kappa0, p):
     plt = pyplot("twisted_ring.py")
     if plt is None:
         return
-    fig = plt.figure(figsize=(3.0 * len(items), 3.4))
+    fig = plt.figure(figsize=(3.0 * len(items) + 0.8, 3.6))
+    elev, azim = 25, -60
     scale = max(float(np.abs(dg.material_twist_density(base.with_imposed_twist(o["twist"]), st)).max())
                 for o, st in items) * p.a0
     for i, (obs, state) in enumerate(items):
@@ -167,12 +195,19 @@ def _picture(base, items, kappa0, p):
         ax.set(xlim=(-lim, lim), ylim=(-lim, lim), zlim=(-lim, lim))
         ax.set_box_aspect((1, 1, 1), zoom=1.3)
         ax.set_axis_off()
-        ax.view_init(elev=25, azim=-60)
+        ax.view_init(elev=elev, azim=azim)
         ax.set_title(f"Lk = {obs['linking_number']:.3f}\nTw = {obs['twist_total']:.3f}, "
                      f"Wr = {obs['writhe']:.3f}", fontsize=9)
-    fig.suptitle(f"twisted ring, kappa0 a0 = {kappa0 * p.a0:g}, A1/A2 = {p.A1 / p.A2:.3g}, n = {p.n}; colour: "
-                 f"material twist, blue -{scale:.2g} to red +{scale:.2g} per a0", fontsize=9)
-    fig.subplots_adjust(left=0, right=1, bottom=0, top=0.82, wspace=0)
+    fig.suptitle(f"twisted ring, kappa0 a0 = {kappa0 * p.a0:g}, A1/A2 = {p.A1 / p.A2:.3g}, n = {p.n}; each ring centred, "
+                 f"seen from elevation {elev} deg, azimuth {azim} deg (z up, same scale)", fontsize=9)
+    fig.subplots_adjust(left=0, right=1 - 0.8 / (3.0 * len(items) + 0.8), bottom=0.02, top=0.80, wspace=0)
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    cax = fig.add_axes([1 - 0.65 / (3.0 * len(items) + 0.8), 0.12, 0.012 * 12 / (3.0 * len(items) + 0.8), 0.6])
+    bar = fig.colorbar(ScalarMappable(Normalize(-scale, scale), plt.cm.coolwarm), cax=cax)
+    bar.set_label("material twist x a0", fontsize=8)
+    bar.ax.tick_params(labelsize=7)
     fig.savefig(p.png, dpi=110)
 
 
@@ -204,7 +239,8 @@ def _bisect(p, solver, base, state, lo, hi):
     while hi - lo > LOCATE_TOL * abs(hi):
         mid = 0.5 * (lo + hi)
         rod = base.with_imposed_twist(mid)
-        result = solver.solve(der.Scene(rod), state=start_state(rod, state, welded, mid, 0.0, p.a0))
+        result = solver.solve(der.Scene(rod, contacts=contacts(p)),
+                              state=start_state(rod, state, welded, mid, 0.0, p.a0))
         if not result.converged:
             raise RuntimeError(f"bisection solve failed at twist = {mid}: {result.message}")
         if result.stable:
@@ -215,22 +251,25 @@ def _bisect(p, solver, base, state, lo, hi):
 
 
 def validate(p):
-    for name in ("A1", "A2", "a0"):
-        if getattr(p, name) <= 0:
-            raise ValueError(f"--{name} must be > 0; got {getattr(p, name)}")
-    if p.kappa0 is not None and p.kappa0 < 0:
-        raise ValueError(f"--kappa0 must be >= 0 (0: naturally straight, 1/a0: naturally circular); got {p.kappa0}")
-    if p.sweep < 0:
-        raise ValueError(f"--sweep must be >= 0; got {p.sweep}")
     if p.twist is not None and p.twist == 0 and p.sweep:
         raise ValueError("--twist must be non-zero for a sweep (it is the end point)")
-    if not 0 <= p.perturb < 0.5:
-        raise ValueError(f"--perturb must be in [0, 0.5) (a fraction of a0); got {p.perturb}")
-    if p.locate not in (0, 1):
-        raise ValueError(f"--locate must be 0 or 1; got {p.locate}")
+    if p.locate not in (0, 1, True, False):
+        raise ValueError(f"--locate must be on or off; got {p.locate}")
+    if p.png:
+        from der.plotting import require_matplotlib
+        require_matplotlib("--png")
 
 
-run.validate = validate
+def resolve(p):
+    """Record the defaults that depend on other parameters as the values used."""
+    if p.kappa0 is None:
+        p.kappa0 = 1.0 / p.a0
+    if p.twist is None:
+        p.twist = float(default_twist(p))
+
+
+run.validate = validator(PARAMETERS, validate)
+run.resolve = resolve
 
 if __name__ == "__main__":
     sys.exit(scenario_main("twisted_ring", __doc__.splitlines()[0], PARAMETERS, run, n_default=200, n_min=6))

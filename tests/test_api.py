@@ -65,7 +65,7 @@ def test_docstring_examples_run(module):
 
 def test_the_docstrings_say_what_users_asked():
     assert "3-vector" in der.end_torque.__doc__ and "scalar" in der.end_torque.__doc__
-    assert "(3, 3)" in der.clamp.__doc__ and "END NODE" in der.clamp.__doc__
+    assert "(3, 3)" in der.clamp.__doc__ and "CENTRE" in der.clamp.__doc__   # issue 13: about the end centre
     assert "REST length" in der.distributed_force.__doc__
     assert "half an edge" in der.Rod.__doc__
     assert "REST END FRAME" in diagnostics.end_motion.__doc__

@@ -69,8 +69,9 @@ def test_bad_loads_constraints_and_options():
         der.Scene(rod, loads=[der.end_torque([1, 0, np.nan])])
     with pytest.raises(ValueError, match=r"end must be 'start' or 'end'; got 'middle'"):
         der.Scene(rod, constraints=[der.clamp("middle")])
-    with pytest.raises(ValueError, match=r"a clamp can slide only along its end tangent"):
-        der.Scene(rod, constraints=[der.clamp("end", slide=1)])
+    # (issue 13: a clamp may slide along any direction, not only along its end tangent)
+    with pytest.raises(ValueError, match=r"der.clamp: slide must be a non-zero direction 3-vector"):
+        der.Scene(rod, constraints=[der.clamp("end", slide=(0, 0, 0))])
     with pytest.raises(ValueError, match=r"clamp slide must name at most one coordinate axis"):
         der.Scene(rod, constraints=[der.clamp("end", slide=3)])
     with pytest.raises(ValueError, match=r"unknown energy term 'shear'"):

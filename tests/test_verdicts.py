@@ -231,3 +231,28 @@ def test_extensible_rod_with_a_turned_end_is_not_reported_locked_and_follows_bea
     F = der.diagnostics.internal_forces(scene.rod, res.state)
     assert F[n // 2, 2] == pytest.approx(6e-3, rel=0.02)
     assert abs(F[n // 2, 0]) < 1e-2          # a tension of the beam-theory order, not a lock
+
+
+def test_dependent_constraints_end_as_a_status_not_a_zero_division():
+    """Found by tools/fuzz.py: an inextensible straight rod pinned at two interior nodes has dependent length
+    constraints between them (its tension there is indeterminate); the explicit solver's projection divided
+    by a zero pivot and the ZeroDivisionError escaped der.solve. Now: a status with a finite residual."""
+    rod = der.rod_from_shape(shapes.straight(1.6, 13, axis=(1, 0, 0), director=(0, 0, 1)), 49.0, 0.05)
+    scene = der.Scene(rod, loads=[der.distributed_force([-1e-6, 4e-6, -2e-6])],
+                      constraints=[der.pin(5), der.pin(9)])
+    with pytest.raises(der.ConvergenceError) as info:
+        der.solve(scene, solver="explicit", max_steps=5000, time_budget=5.0)
+    r = info.value.result
+    assert r.status == "nonfinite" and np.isfinite(r.residual) and np.isfinite(r.state.q).all()
+    assert "numerical failure" in r.message
+
+
+def test_stability_of_a_scene_with_a_huge_dead_force_does_not_fail_in_svd():
+    """Found by tools/fuzz.py: the direction of a 1e300 dead force (its norm overflows) was 0/0 in the rotation
+    symmetry test and numpy's SVD failed; only the direction matters."""
+    from der.solvers.stability import _dead_directions
+
+    rod = der.rod_from_shape(shapes.straight(1.0, 8), 1.0, 1.0)
+    scene = der.Scene(rod, loads=[der.end_force([1e300, 1e300, 0.0])], constraints=[der.clamp("start")])
+    (d,) = _dead_directions(scene)
+    assert np.allclose(d, [2 ** -0.5, 2 ** -0.5, 0.0], rtol=1e-15)

@@ -183,7 +183,22 @@ def main(argv=None):
     ap.add_argument("--csv", default=None)
     ap.add_argument("--png", default=None)
     ap.add_argument("--rrd", default=None)
+    ap.add_argument("--from-csv", default=None, metavar="CSV",
+                    help="only re-plot --png from a CSV this tool wrote (no solve), e.g. docs/figures/error_vs_runtime.csv")
     args = ap.parse_args(argv)
+    if args.png:
+        from der.plotting import require_matplotlib
+        try:
+            require_matplotlib("--png")
+        except ValueError as exc:
+            print(f"error_vs_runtime.py: invalid input: {exc}", file=sys.stderr)
+            sys.exit(2)
+    if args.from_csv:
+        if not args.png:
+            print("error_vs_runtime.py: invalid input: --from-csv needs --png (it only re-plots)", file=sys.stderr)
+            sys.exit(2)
+        _plot(read_csv(args.from_csv), args.png)
+        return
     names = [args.scenario] if args.scenario else list(SCENARIOS)
     compile_s = der.warmup()
     results, summary, sources = [], [], {}
@@ -253,28 +268,47 @@ def main(argv=None):
                           "summary": summary, "sources": sources}))
 
 
+def read_csv(path):
+    """The rows of a CSV written by ``--csv`` (types restored), for ``--from-csv``."""
+    rows = []
+    with open(path, newline="") as fh:
+        for r in csv.DictReader(fh):
+            num = lambda v, f=float: f(v) if v not in ("", "None") else None  # noqa: E731
+            rows.append({"scenario": r["scenario"], "solver": r["solver"], "n": int(r["n"]), "error": num(r["error"]),
+                         "runtime_s": num(r["runtime_s"]), "iterations": num(r["iterations"], int),
+                         "converged": r["converged"] == "True", "status": r["status"], "runs": num(r["runs"], int)})
+    return rows
+
+
 def _plot(results, path):
     from der.plotting import pyplot
 
     plt = pyplot("error_vs_runtime.py")
     if plt is None:
         return
-    fig, ax = plt.subplots(figsize=(7, 5))
+    fig, ax = plt.subplots(figsize=(10, 5.5))
     keys = sorted({(r["scenario"], r["solver"]) for r in results})
+    names = sorted({k[0] for k in keys})
     for i, (name, solver) in enumerate(keys):
-        rows = [r for r in results if (r["scenario"], r["solver"]) == (name, solver) and r["converged"]]
+        rows = [r for r in results if (r["scenario"], r["solver"]) == (name, solver) and r["converged"]
+                and r["error"] and r["runtime_s"]]
         if not rows:
             continue
+        color = f"C{names.index(name)}"
         ax.loglog([r["runtime_s"] for r in rows], [r["error"] for r in rows],
-                  "o-" if solver == "implicit" else "s--", color=f"C{sorted({k[0] for k in keys}).index(name)}",
-                  label=f"{name}, {solver}")
-        for r in rows:
-            ax.annotate(str(r["n"]), (r["runtime_s"], r["error"]), fontsize=6, xytext=(3, 3),
-                        textcoords="offset points")
+                  "o-" if solver == "implicit" else "s--", color=color, label=f"{name}, {solver}", ms=4)
+        # n only at the last point of each curve (every point labelled piled up where the implicit curves cross,
+        # near 1e-3 s and 1e-3); the first n, the same for every curve, is said in the title
+        last = rows[-1]
+        above = names.index(name) % 2 == 0   # alternate, so that neighbouring curves' labels do not overlap
+        ax.annotate(f"n={last['n']}", (last["runtime_s"], last["error"]), fontsize=7, color=color,
+                    va="bottom" if above else "top", ha="left", xytext=(4, 4 if above else -4),
+                    textcoords="offset points")
     ax.set(xlabel="solve wall time [s] (median of 3, compilation excluded)", ylabel="relative error",
-           title="error against run time (labels: n)")
+           title=f"error against run time: n = {min(r['n'] for r in results)} edges at the left end of each curve, "
+                 "doubling along it")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
 

@@ -105,7 +105,24 @@ def main(argv=None):
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--png", default=None)
     ap.add_argument("--single", nargs=2, metavar=("PROBLEM", "N"), help=argparse.SUPPRESS)
+    ap.add_argument("--from-json", default=None, metavar="JSON",
+                    help="only re-plot --png from the saved output of --json (no solve)")
     args = ap.parse_args(argv)
+    if args.png:
+        from der.plotting import require_matplotlib
+        try:
+            require_matplotlib("--png")
+        except ValueError as exc:
+            print(f"scaling.py: invalid input: {exc}", file=sys.stderr)
+            sys.exit(2)
+    if args.from_json:
+        if not args.png:
+            print("scaling.py: invalid input: --from-json needs --png (it only re-plots)", file=sys.stderr)
+            sys.exit(2)
+        with open(args.from_json) as fh:
+            text = fh.read().strip().splitlines()
+        _plot(json.loads(text[-1])["rows"], args.png)   # the last line of a --json run
+        return
     if args.single:
         print(json.dumps(single(args.single[0], int(args.single[1]))))
         return
@@ -153,13 +170,27 @@ def _plot(rows, path):
     plt = pyplot("scaling.py")
     if plt is None:
         return
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.4))
+    unconverged_shown = False
     for i, problem in enumerate(sorted({r["problem"] for r in rows})):
         pr = [r for r in rows if r["problem"] == problem and "solve_s" in r]
         ns = [r["n"] for r in pr]
-        axes[0].loglog(ns, [r["solve_s"] for r in pr], "o-", color=f"C{i}", label=f"{problem}: solve")
-        axes[0].loglog(ns, [r["s_per_iteration"] for r in pr], "s--", color=f"C{i}", label=f"{problem}: per iteration")
+        axes[0].loglog(ns, [r["solve_s"] for r in pr], "-", color=f"C{i}", label=f"{problem}: solve")
+        axes[0].loglog(ns, [r["s_per_iteration"] for r in pr], "--", color=f"C{i}", label=f"{problem}: per iteration")
         axes[1].loglog(ns, [max(r["traced_peak_mb"], 1e-3) for r in pr], "o-", color=f"C{i}", label=problem)
+        # a solve that did not converge (e.g. the n = 1e5 ring at its time budget) is drawn hollow with a cross,
+        # not like a converged point: its time is only the time until it stopped
+        for r in pr:
+            ok = r.get("converged", True)
+            for key, marker in (("solve_s", "o"), ("s_per_iteration", "s")):
+                axes[0].loglog([r["n"]], [r[key]], marker, color=f"C{i}", mfc=f"C{i}" if ok else "white", ms=6)
+                if not ok:
+                    axes[0].loglog([r["n"]], [r[key]], "x", color="k", ms=7,
+                                   label=None if unconverged_shown else "not converged (stopped: time budget)")
+                    unconverged_shown = True
+            if not ok:
+                axes[0].annotate(f"not converged ({r['status']})", (r["n"], r["solve_s"]), fontsize=7,
+                                 xytext=(-8, -2), textcoords="offset points", ha="right", va="top")
     ns = np.array([100, 100000])
     axes[0].loglog(ns, 1e-5 * ns, "k:", lw=0.8, label="~ n")
     axes[0].set(xlabel="edges n", ylabel="seconds", title="implicit solver: time to equilibrium")

@@ -10,7 +10,7 @@ import numpy as np
 from .options import (
     STATUSES, ConvergenceError, LockedRodWarning, RoundoffFloorWarning, SolveResult, SolverOptions,
 )
-from .system import build_system, check_equilibrium_exists, locked_rod_note, prepare_state
+from .system import build_system, numerical_failure, check_equilibrium_exists, locked_rod_note, prepare_state
 
 SOLVERS = ("implicit", "explicit")
 
@@ -97,10 +97,22 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
         raise ValueError(f"the starting state must be finite (entry {bad} of q is {state.q[bad] if bad >= 0 else '?'})")
     if record is not None and isinstance(record, (str, os.PathLike)):
         check_record_path(record, "der.solve: record")
+    if scene.contacts and solver != "implicit":
+        raise ValueError("der.solve: contact terms need the implicit solver (solver='implicit'); the explicit "
+                         "solver has no CCD-limited step yet")
     compile_time = _compile_first()
+    if scene.contacts:
+        from ..terms import warmup as _contact_warmup
+
+        compile_time += _contact_warmup()
     system = build_system(scene, options)     # refuses loads whose scale is not a finite double
     work = prepare_state(system, state)
-    check_equilibrium_exists(system, work)    # refuses a net load on a rigid motion nothing can react to
+    if not system.terms:                      # (a contact can react to a net load)
+        check_equilibrium_exists(system, work)    # refuses a net load on a rigid motion nothing can react to
+    for term in system.terms:                 # contact: an inadmissible start is refused before any work
+        term.check_start(work)
+    for term in system.terms:
+        term.start_stiffness(work, system)
     recorder = None
     if record is not None:
         from ..recording import Recorder
@@ -116,7 +128,11 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
         else:
             from .explicit import solve_explicit
 
-            result = solve_explicit(system, work, options, progress, recorder)
+            start = work.copy()
+            try:
+                result = solve_explicit(system, work, options, progress, recorder)
+            except (ArithmeticError, np.linalg.LinAlgError) as exc:
+                result = numerical_failure(system, work, start, exc, "explicit")
         if result.status != "interrupted":
             note = locked_rod_note(system, result.state)
             if note:
@@ -130,6 +146,11 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
             stability(system, result, options.n_eigenvalues)
         result.compile_time = compile_time
         result.tol = options.tol
+        result.linear_solves = dict(system.linear_solves)
+        if system.terms:
+            from ..diagnostics import contact_forces
+
+            result.contact = contact_forces(system, result.state)
         if recorder is not None:
             recorder.log_final(result)
     finally:

@@ -9,7 +9,16 @@ limit ``2 / omega_max``, with ``omega_max^2`` bounded by Gershgorin's theorem on
 mode -- stretch, bend or twist -- is the stiffest. By default the step is capped at ``safety / omega_max``, half
 the limit, where a step from rest lowers the energy of every mode. A step that would raise the total energy is rejected and
 restarted from rest (for circulatory loads, which can feed energy in, only a large rise is: an unstable step).
-The whole inner loop is one numba kernel; Python only checks convergence every ``check_every`` steps.
+
+An inextensible rod moves on its constraint manifold |e_j| = l_j (``der.solvers.projection``): the force is
+split into its tangent part and the tension (the multiplier, kept in ``state.lam``), positions are projected
+back after each step (the fast projection of Goldenthal et al. 2007) and velocities onto the tangent space
+(RATTLE). No axial penalty enters the dynamics, so the stable step is set by bending and twisting alone (plus
+the geometric stiffness of the tension); the implicit solver's penalty is put back for the stability analysis.
+
+The inner loop is one numba kernel. Python checks convergence after each call; a call runs at most
+``check_every`` steps and about CHUNK_SECONDS of wall time (sized from the measured cost of a step), so the
+time budget and Ctrl-C are honoured promptly. Every loop is bounded by a counter that always advances.
 """
 import time
 
@@ -17,14 +26,17 @@ import numpy as np
 from numba import njit
 
 from ..geometry import transport_frames
+from ..linalg import condense_vector
 from ..scene import evaluate, make_plan
+from .projection import held_strain, inverse_mass, project_force, project_positions, project_velocity
 from .system import (
-    INTERRUPTS, constraint_residual, energy_terms, evaluate_system, final_result, floor_verdict, is_interrupt,
-    load_scales, max_strain, multiplier_update, newton_error_estimate, residual_norm, residual_vector,
+    INTERRUPTS, constrain_system, energy_terms, evaluate_system, final_result, floor_verdict, is_interrupt,
+    load_scales, max_strain, newton_error_estimate, residual_norm, residual_vector, transport,
 )
 
 STATUS_RUNNING, STATUS_CONVERGED, STATUS_NONFINITE = 0, 1, 2
 STALL_STEPS = 20_000   # no halving of the residual in this many steps (or a quarter of the run): stalled
+NOISE_FACTOR = 3.0     # at the floor, a negative power below this many standard deviations of its noise is ignored
 
 
 @njit(cache=True)
@@ -65,17 +77,24 @@ def stable_time_step(system, state):
 
 
 def _zero_fixed(ab, system):
-    from ..linalg import constrain_band
-
-    constrain_band(ab, system.kl, system.ku, system.perm, system.fixed, 0.0)
+    constrain_system(system, ab, 0.0)     # T^T K T on the end supports' free variables, held DOFs removed
 
 
 @njit(cache=True)
 def _fire_run(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol, n_steps, dt, dt_max,
-              alpha, n_pos, n_min, f_inc, f_dec, alpha0, f_alpha, kl, ku, perm, e_total, work_done, guard):
+              alpha, n_pos, n_min, f_inc, f_dec, alpha0, f_alpha, kl, ku, perm, e_total, work_done, guard,
+              project, w, closed, target, max_strain, noise, link_dep, link_const, tri_dep, tri_master, tri_coef):
     """Run up to n_steps FIRE steps in place. Returns (status, steps, residual, dt, alpha, n_pos, e_total,
     work_done, rejected, dt_max): a step rejected near the cap also lowers the cap by 10 %, so that the integrator
-    settles below the step at which its energy error shows (fewer restarts: FIRE keeps its momentum)."""
+    settles below the step at which its energy error shows (fewer restarts: FIRE keeps its momentum).
+
+    With ``project`` (an inextensible rod; ``plan`` then has no stretch term) the edge lengths are constraints:
+    the force is split into its part along the constraint manifold (the rest is balanced by the tension, written
+    to ``lam``), and after each step the positions are projected back onto the manifold (fast projection) and
+    the velocity onto its tangent space (RATTLE). ``w`` is the inverse mass (zero on fixed DOFs); a step whose
+    projection leaves a strain above ``max_strain`` is rejected like an energy-raising one; the projection
+    iterates only while the strain exceeds ``target``, so that tiny steps are not moved by its round-off.
+    ``noise``: the round-off of each force component once the solve is at the round-off floor (else zeros)."""
     n = q.shape[0]
     grad = np.zeros(n)
     fext = np.zeros(n)
@@ -91,7 +110,11 @@ def _fire_run(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol,
     for step in range(n_steps):
         residual = 0.0
         for i in range(n):
-            f[i] = 0.0 if fixed[i] else fext[i] - grad[i]
+            f[i] = fext[i] - grad[i]
+        condense_vector(f, tri_dep, tri_master, tri_coef, fixed)   # end supports: forces on the free variables
+        if project and not project_force(q, plan.edge_nodes, plan.l_bar, w, closed, f, lam):
+            return STATUS_NONFINITE, step, residual, dt, alpha, n_pos, e_total, work_done, rejected, dt_max
+        for i in range(n):
             r = abs(f[i]) * inv_scale[i]
             if r > residual:
                 residual = r
@@ -103,11 +126,15 @@ def _fire_run(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol,
         power = 0.0
         vnorm2 = 0.0
         fnorm2 = 0.0
+        pnoise2 = 0.0
         for i in range(n):
             power += f[i] * v[i]
             vnorm2 += mass[i] * v[i] * v[i]
             fnorm2 += f[i] * f[i] / mass[i]
-        if power > 0.0:
+            pnoise2 += (noise[i] * v[i]) ** 2
+        # at the round-off floor a negative power within the force's round-off noise is no overshoot: that noise
+        # would restart FIRE every few steps and the slow modes would never gain momentum (noise = 0 before)
+        if power > -NOISE_FACTOR * np.sqrt(pnoise2):
             if fnorm2 > 0.0:
                 c = alpha * np.sqrt(vnorm2 / fnorm2)
                 for i in range(n):
@@ -131,7 +158,19 @@ def _fire_run(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol,
             if not fixed[i]:
                 v[i] += dt * f[i] / mass[i]
                 q[i] += dt * v[i]
-        ok = transport_frames(q, plan.edge_nodes, plan.vertex_edges, t_old, d1_old, tw_old, tangents, d1, twist)
+        for k in range(link_dep.shape[0]):      # end supports: dependents follow their masters
+            q[link_dep[k]] = link_const[k]
+        for k in range(tri_dep.shape[0]):
+            q[tri_dep[k]] += tri_coef[k] * q[tri_master[k]]
+        ok = True
+        if project:
+            # positions back onto |e_j| = l_j (a step of dt v leaves a strain O(dt^2 v^2 / l^2)); the velocity made
+            # tangent there (RATTLE: the normal part, the constraint impulse, is removed). With an inextensible
+            # rod the supports hold their end edges rigidly (no coupled links: see solve_explicit)
+            ok = project_positions(q, plan.edge_nodes, plan.l_bar, w, closed, 20, target) <= max_strain
+            if ok:
+                ok = project_velocity(q, plan.edge_nodes, plan.l_bar, w, closed, v)
+        ok = ok and transport_frames(q, plan.edge_nodes, plan.vertex_edges, t_old, d1_old, tw_old, tangents, d1, twist)
         fext_old_dot = 0.0
         for i in range(n):
             fext_old_dot += fext[i] * (q[i] - q_old[i])
@@ -147,7 +186,9 @@ def _fire_run(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol,
         new_total = kinetic + new_energy - new_work
         # energy guard: for conservative loads only the round-off of the energy is tolerated (guard ~ 64 eps), so
         # the recorded energy never increases; circulatory loads may feed energy in, and the guard then only
-        # catches an unstable step (guard = 1e-6)
+        # catches an unstable step (guard = 1e-6). With the projection the same total is a Lyapunov function: the
+        # tension does no work along the manifold (it is not in the energy, the state stays on the manifold) and
+        # the RATTLE velocity projection is M-orthogonal, so it only removes kinetic energy.
         slack = guard * (abs(new_energy) + abs(new_work) + abs(kinetic))
         if not ok or not (new_total <= e_total + slack):
             # reject: back to the old state, at rest, smaller step
@@ -173,11 +214,61 @@ def _fire_run(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol,
 
 
 def solve_explicit(system, state, options, progress=None, recorder=None):
-    """Relax ``state`` (a prepared working copy, modified in place) by FIRE damped dynamics."""
+    """Relax ``state`` (a prepared working copy, modified in place) by FIRE damped dynamics.
+
+    An inextensible rod is integrated on its constraint manifold (``der.solvers.projection``): no axial
+    penalty enters the dynamics, so the stable step is set by bending and twisting (and the tension's geometric
+    stiffness) alone; the tension is the multiplier of the force projection, left in ``state.lam``.
+    Every loop is bounded: each pass of the outer loop runs at least one step or counts as an idle pass
+    (at most IDLE_PASSES of them), and each pass lasts at most about CHUNK_SECONDS, so the time budget and Ctrl-C
+    are honoured whatever ``check_every`` is.
+    """
     rod = system.rod
+    project = rod.inextensible
+    fixed = system.fixed
+    w = inverse_mass(system)
+    strain_tol = options.effective_strain_tol
+    # a step must leave the constraints far inside the requested strain tolerance (the projection itself goes
+    # to the round-off floor, ~1e-15)
+    proj_strain = max(min(1e-3 * strain_tol, 1e-10), PROJECTION_TARGET)
+    plan = system.plan
+    t_start = time.perf_counter()
+    if project and system.links.tri_dep.size:
+        raise ValueError("the explicit solver cannot yet hold an inextensible rod by a hinge, a roller or a sliding "
+                         "clamp (their end edges move with coupled coordinates, which its length projection does not "
+                         "handle); use solver='implicit', or give the rod EA")
+    if project:
+        # the penalty is not used: the plan's stretch term keeps only the multiplier (for the residual, the load
+        # scale and the tension's geometric stiffness in the stable step); the kernel runs without it
+        system.plan.k_stretch[:] = 0.0
+        state.penalty = system.plan.k_stretch.copy()
+        plan = system.plan._replace(has_stretch=False)
+        base = state.copy()
+        q = state.q.copy()
+        if not project_positions(q, rod.edge_nodes, rod.l_bar, w, rod.closed, 100, PROJECTION_TARGET) <= proj_strain \
+                or not transport(system, base, q, state):
+            _restore_penalty(system, state)
+            raise ValueError("the starting state cannot be projected onto the inextensible rod's edge lengths "
+                             "(its edges are too far from their rest lengths, or fixed nodes hold an edge at "
+                             "another length); start closer to the rest shape or give the rod EA")
+        _initial_tension(system, state, w)
+        held, held_eps = held_strain(rod, state, w)
+        if held.size and held_eps.max() > strain_tol:
+            # no step can change these lengths: the solve cannot end with strain <= strain_tol, say so now
+            j = int(held[np.argmax(held_eps)])
+            _restore_penalty(system, state)
+            evaluate_system(system, state, 1)
+            r0 = residual_norm(system, residual_vector(system), load_scales(system, state))
+            return final_result(
+                system, state, "stalled", residual=r0, iterations=0, wall_time=time.perf_counter() - t_start,
+                message=f"edge {j} lies between fixed nodes at strain {held_eps.max():.2e} > strain_tol "
+                f"{strain_tol:.1e}: the constraints hold the inextensible rod away from its rest length (start from a "
+                "state whose clamped edges have their rest length)", solver="explicit", strain=float(held_eps.max()),
+                history=[], dt=None, residual_floor=float("nan"))
     dt_stable, bounds = stable_time_step(system, state)
     stiffest = max((k for k in bounds if k != "all"), key=lambda k: bounds[k], default="all")
     if options.dt is not None and options.dt > dt_stable:
+        _restore_penalty(system, state)
         raise ValueError(f"explicit time step dt={options.dt:.3e} exceeds the stable limit {dt_stable:.3e} "
                          f"(2/omega_max, omega_max^2 <= {bounds['all']:.3e} from the {stiffest} mode); "
                          "use dt=None for the largest stable step")
@@ -187,73 +278,98 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
     dt_max = options.dt if options.dt is not None else options.safety * 0.5 * dt_stable
     dt = 0.1 * dt_max
     alpha, n_pos = options.fire_alpha, 0
-    t_start = time.perf_counter()
     v = np.zeros(rod.n_dof)
-    fixed = system.fixed
-    strain_tol = options.effective_strain_tol
     history, energies = [], []
-    steps, rejected_total = 0, 0
+    steps, rejected_total, passes, idle = 0, 0, 0, 0
     residual = np.inf
     strain = 0.0
     status, message = "max_iterations", f"no convergence within {options.max_steps} steps"
     last_good = state.copy()
-    evaluate_system(system, state, 1)
     e_total, work_done = None, 0.0
-    conservative = not (system.plan.has_theta or system.plan.has_dead_torques)
+    conservative = not (system.plan.has_theta or system.plan.has_dead_torques or system.plan.has_follower
+                        or system.plan.has_follower_torques)
     guard = 64 * np.finfo(float).eps if conservative else 1e-6
-    check = 0
-    best, since_best = np.inf, 0
+    best, best_step = np.inf, 0
+    best_err = np.inf     # the last Newton error estimate at the round-off floor
+    noise = np.zeros(rod.n_dof)
     floor = np.nan
+    step_cost = None      # measured seconds per step: sizes the chunks
     try:
         while True:
+            passes += 1
             scales = load_scales(system, state)
             F_s, M_s = scales
             inv_scale = 1.0 / np.where(system.is_theta, M_s, F_s)
             if e_total is None:
-                e_total = evaluate_system(system, state, 1) + 0.5 * float(system.mass @ v ** 2) - work_done
-            n = min(options.check_every, options.max_steps - steps)
+                energy = float(evaluate(plan, state.q, state.d1, state.reference_twist, state.lam, 1, system.grad,
+                                        system.fext, system.ab, system.kl, system.ku, system.perm))
+                e_total = energy + 0.5 * float(system.mass @ v ** 2) - work_done
+            n = _chunk_steps(options, steps, step_cost, time.perf_counter() - t_start)
+            t_chunk = time.perf_counter()
             code, done, residual, dt, alpha, n_pos, e_total, work_done, rejected, dt_max = _fire_run(
-                system.plan, state.q, state.d1, state.tangents, state.reference_twist, state.lam, v, system.mass,
+                plan, state.q, state.d1, state.tangents, state.reference_twist, state.lam, v, system.mass,
                 fixed, inv_scale, options.tol, n, dt, dt_max, alpha, n_pos, options.fire_n_min, options.fire_f_inc,
                 options.fire_f_dec, options.fire_alpha, options.fire_f_alpha, system.kl, system.ku, system.perm,
-                e_total, work_done, guard)
+                e_total, work_done, guard, project, w, rod.closed, PROJECTION_TARGET, proj_strain, noise,
+                system.links.dep, system.links.const, system.links.tri_dep, system.links.tri_master,
+                system.links.tri_coef)
+            if done > 0:
+                cost = (time.perf_counter() - t_chunk) / done
+                step_cost = cost if step_cost is None else max(cost, 0.5 * step_cost)
             steps += done
             rejected_total += rejected
-            check += 1
             if code == STATUS_NONFINITE:
                 state.copy_from(last_good)
                 status, message = "nonfinite", f"non-finite force at step {steps}; last finite state kept"
                 break
+            if project:
+                _initial_tension(system, state, w)   # the multipliers at the state the kernel ended in
             last_good.copy_from(state)
             energies.append(e_total)
             strain = max_strain(system, state) if rod.inextensible else 0.0
             evaluate_system(system, state, 1)
             residual = residual_norm(system, residual_vector(system), load_scales(system, state))
             history.append(residual)
-            if recorder is not None and check % options.record_every == 0:
+            if recorder is not None and passes % options.record_every == 0:
                 recorder.log_step(steps, state, residual, energy_terms(system, state))
             if progress is not None:
                 progress.update(steps, residual, f"dt={dt:.2e}")
             if residual <= options.tol and strain <= strain_tol:
                 status, message = "converged", f"residual {residual:.2e} <= tol {options.tol:.1e}"
                 break
+            if done == 0:
+                # the kernel stopped before its first step although the outer check does not accept the state
+                # (its residual was measured on the chunk's load scales): never loop on that
+                idle += 1
+                if idle >= IDLE_PASSES:
+                    status, message = "stalled", (f"residual {residual:.2e} (tol {options.tol:.1e}) and strain "
+                                                  f"{strain:.1e} (strain_tol {strain_tol:.1e}) no longer change")
+                    break
+                e_total = None
             if residual < 0.5 * best:
-                best, since_best = residual, 0
-            else:
-                since_best += 1
-            if since_best * options.check_every >= max(STALL_STEPS, steps // 4) and strain <= strain_tol:
+                best, best_step = residual, steps
+            elif steps - best_step >= max(STALL_STEPS, steps // 4):
                 # no progress for a while: stop if that is the round-off floor; otherwise FIRE may just be slow
                 # (the step and time limits still apply)
                 evaluate_system(system, state, 2)
                 verdict, floor, msg = floor_verdict(system, state, load_scales(system, state), residual,
-                                                    options.tol, f"no progress in {since_best * options.check_every}"
-                                                    " steps")
+                                                    options.tol, f"no progress in {steps - best_step} steps")
                 if verdict == "converged_at_floor":
                     # At the round-off floor the slow modes are driven by forces buried in round-off, so unlike
                     # Newton the explicit solver cannot claim convergence from the residual: certify with the
                     # size of one Newton correction (not applied), the error left in the slow modes.
+                    _restore_penalty(system, state)
                     err = newton_error_estimate(system, state)
-                    if err <= options.displacement_tol:
+                    if project:
+                        system.plan.k_stretch[:] = 0.0
+                    if err > options.displacement_tol and err < 0.5 * best_err:
+                        # the max-norm residual is round-off noise now, but the slow modes still converge (the
+                        # error estimate halved since the last look): go on (the step and time limits apply),
+                        # with FIRE's restarts blind to a power within the noise (floor x scale per component)
+                        best_err = err
+                        noise = floor / inv_scale
+                        noise[fixed] = 0.0
+                    elif err <= options.displacement_tol:
                         status = "converged_at_floor"
                         message = (msg + f"; a Newton correction would move it by {err:.1e} of the displacement"
                                    f" (<= displacement_tol {options.displacement_tol:.0e})")
@@ -263,32 +379,85 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
                                    f"{floor:.1e} but above tol {options.tol:.1e}, and a Newton correction would still "
                                    f"move the state by {err:.1e} of its displacement: the slow modes are not "
                                    "converged (use the implicit solver, a larger tol or a larger load)")
-                    break
-                best, since_best = residual, 0   # above the floor FIRE may just be slow: go on
-            if rod.inextensible and strain > strain_tol:
-                if residual <= max(options.tol, 0.1 * constraint_residual(system, state, scales)):
-                    multiplier_update(system, state)   # fixed penalty: FIRE's inner solves are inexact
-                    e_total = None     # the energy function changed: new baseline
-                    best, since_best = np.inf, 0
-            if steps >= options.max_steps:
+                    if status != "max_iterations":
+                        break
+                best, best_step = residual, steps   # above the floor FIRE may just be slow: go on
+            if steps + idle >= options.max_steps or passes >= options.max_steps + IDLE_PASSES:
                 break
             if time.perf_counter() - t_start > options.time_budget:
                 status, message = "time_budget", f"time budget of {options.time_budget:g} s used up"
                 break
-            if check % 10 == 0 and options.dt is None:
+            if passes % 10 == 0 and options.dt is None:
                 # the stiffness changes as the rod deforms: keep the step below the stable limit
                 dt_stable, bounds = stable_time_step(system, state)
                 dt_max = min(dt_max, options.safety * 0.5 * dt_stable)
                 dt = min(dt, dt_max)
     except INTERRUPTS as exc:
         if not is_interrupt(exc):
+            _restore_penalty(system, state)
             raise
         state.copy_from(last_good)
         status, message = "interrupted", "interrupted by the user; last state kept"
-    res = final_result(system, state, status, residual=float(residual), iterations=steps,
-                       wall_time=time.perf_counter() - t_start,
-                       message=message + f" ({rejected_total} steps rejected; stiffest mode: {stiffest}, dt_max "
+    wall = time.perf_counter() - t_start
+    _restore_penalty(system, state)
+    how = "edge lengths held by projection; " if project else ""
+    res = final_result(system, state, status, residual=float(residual), iterations=steps, wall_time=wall,
+                       message=message + f" ({how}{rejected_total} steps rejected; stiffest mode: {stiffest}, dt_max "
                        f"{dt_max:.2e})", solver="explicit", strain=strain, history=history, dt=dt,
                        residual_floor=float(floor))
     res.total_energy = energies
+    res.dt_max = dt_max      # the step cap the run ended with (the stable-step bound times safety / 2)
     return res
+
+
+PROJECTION_TARGET = 1e-13   # strain the projection aims at (below it, it leaves the positions alone)
+IDLE_PASSES = 100       # outer passes in a row without a step before the solve is declared stalled
+CHUNK_SECONDS = 0.25    # a kernel call lasts about this long at most: checks, time budget and Ctrl-C stay prompt
+FIRST_CHUNK = 50        # steps of the first call, which measures the cost of a step
+
+
+def _chunk_steps(options, steps, step_cost, elapsed):
+    """Steps for the next kernel call: at most ``check_every``, the steps left, and what fits in CHUNK_SECONDS
+    (and in the time budget left) at the measured cost of a step."""
+    n = min(options.check_every, options.max_steps - steps)
+    if step_cost is None:
+        return max(1, min(n, FIRST_CHUNK))
+    seconds = min(CHUNK_SECONDS, max(options.time_budget - elapsed, 0.0))
+    return max(1, min(n, int(seconds / max(step_cost, 1e-12))))
+
+
+def _initial_tension(system, state, w):
+    """The tension that balances the force at ``state`` as well as the edge lengths can (the multiplier of the
+    force projection) into state.lam: before the run, so that the first stable-step estimate includes its
+    geometric stiffness, and after each kernel call, so that the residual checked is the projected one."""
+    evaluate_system(system, state, 1)
+    f = system.fext - system.grad
+    f[system.fixed] = 0.0
+    # the plan still has the multiplier term: remove it from the force before projecting
+    _add_lam_force(system, state, f)
+    rod = system.rod
+    project_force(state.q, rod.edge_nodes, rod.l_bar, w, rod.closed, f, state.lam)
+
+
+def _add_lam_force(system, state, f):
+    """f += C^T lam: undo the multiplier's share of -dE/dq (the stretch term with k = 0 is lam_j g_j)."""
+    rod = system.rod
+    x = state.q.reshape(-1, 4)[:, :3]
+    e = x[rod.edge_nodes[:, 1]] - x[rod.edge_nodes[:, 0]]
+    t = e / np.linalg.norm(e, axis=1)[:, None]
+    h = state.lam[:, None] * t
+    F = np.zeros_like(x)
+    np.add.at(F, rod.edge_nodes[:, 0], -h)
+    np.add.at(F, rod.edge_nodes[:, 1], h)
+    g = f.reshape(-1, 4)
+    g[:, :3] += F
+    f[system.fixed] = 0.0
+
+
+def _restore_penalty(system, state):
+    """Put the augmented-Lagrangian penalty back into the plan after a projected solve: the stability analysis
+    and the diagnostics see the same stiffness as after an implicit solve (the strain is ~1e-15, so the
+    reported tension lam + k g is the multiplier)."""
+    if system.rod.inextensible:
+        system.plan.k_stretch[:] = system.k_initial
+        state.penalty = system.k_initial.copy()

@@ -24,14 +24,16 @@ import time
 
 import numpy as np
 
-from ..linalg import add_diagonal, band_solve, constrain_band
+from ..linalg import add_diagonal, band_solve, band_to_coo, constrain_band
 from .system import (
-    FLOOR_FACTOR, INTERRUPTS, constraint_residual, energy_terms, evaluate_system, final_result, floor_forces,
-    floor_verdict, is_interrupt, load_scales, max_strain, multiplier_update, residual_floor, residual_norm,
-    residual_vector, transport,
+    FLOOR_FACTOR, INTERRUPTS, constrain_system, constraint_residual, energy_terms, evaluate_system, expand,
+    final_result, floor_forces, floor_verdict, is_interrupt, load_scales, max_strain, multiplier_update,
+    residual_floor, residual_norm, residual_vector, transport,
 )
 
 STALL_ITERATIONS = 6
+# contact: below this residual, after a full Newton step, the barrier Hessian is used unprojected
+EXACT_CONTACT_BELOW = 1e-4
 FLOOR_STALL_ITERATIONS = 2      # enough once the residual is down at the round-off floor
 # pseudo-time step reductions (x0.1 each) before a step is declared impossible: enough to go from Newton's
 # method (dt up to 1e30) down to a step that only damps (dt ~ 1e-10); 12 near the round-off floor
@@ -86,9 +88,16 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     potential = potential_best = 0.0     # E - work of the loads, from the start of this loop
     ab_K = np.empty_like(system.ab)
     work = np.empty_like(system.ab)
+    exact_contact = False        # contact: exact (unprojected) barrier Hessian in Newton's end game
     try:
         while True:
+            for t in system.terms:
+                t.project = not exact_contact
             energy = evaluate_system(system, state, 2)
+            if system.terms and any([t.after_step(state) for t in system.terms]):
+                # contact: the adaptive barrier stiffness changed (docs/contact.md section 6); a new landscape
+                energy = evaluate_system(system, state, 2)
+                best, since_best, potential_best = np.inf, 0, potential
             R = residual_vector(system)
             scales = load_scales(system, state)
             residual = residual_norm(system, R, scales)
@@ -143,6 +152,9 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
             it += 1
             ab_K[:] = system.ab
             diag = np.abs(ab_K[kl + ku, :][perm])
+            coo = system.contact_coo            # off-band contact Hessian triplets (empty: banded path)
+            if coo:
+                diag += _coo_diagonal(coo, diag.size)
             diag[diag == 0] = 1.0
             fext = system.fext.copy()
             round_off = floor_forces(system, state)
@@ -152,14 +164,29 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                     break   # near the round-off floor a step that lowers the energy may not exist
                 work[:] = ab_K
                 add_diagonal(work, kl, ku, perm, diag, 1.0 / dt)
-                constrain_band(work, kl, ku, perm, system.fixed, 1.0)
-                delta, info = band_solve(work, kl, ku, perm, R)
+                constrain_system(system, work, 1.0)     # T^T (K + D/dt) T: the end supports' free variables
+                if coo:
+                    delta, info = _contact_solve(system, work, coo, R)
+                else:
+                    delta, info = band_solve(work, kl, ku, perm, R)
+                    system.linear_solves["band"] += 1
+                expand(system, delta)
                 with np.errstate(over="ignore", invalid="ignore"):   # a huge step is refused just below
                     slope = float(R @ delta)
                 if info != 0 or not np.all(np.isfinite(delta)) or slope <= 0:
+                    if exact_contact:
+                        break         # the exact contact Hessian is indefinite here: back to the projected one
                     dt = shrink(dt, options)
                     continue
                 a = 1.0
+                if system.terms:
+                    # contact: start at the CCD-safe fraction, so that no strand passes through another (or
+                    # through an obstacle) anywhere within the step
+                    a = min([1.0] + [t.max_step(state, delta) for t in system.terms])
+                    if not a > 0.0:
+                        dt = shrink(dt, options)
+                        continue
+                a_start = a
                 for _ls in range(options.line_search_steps):
                     if transport(system, state, state.q + a * delta, trial):
                         e_trial = evaluate_system(system, trial, 0)
@@ -169,9 +196,13 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                             accepted = True
                             break
                     a *= 0.5
-                if accepted:
+                if accepted or exact_contact:
                     break
                 dt = shrink(dt, options)
+            if not accepted and exact_contact:
+                exact_contact = False
+                it -= 1
+                continue
             if not accepted:
                 evaluate_system(system, state, 2)
                 status, floor, message = floor_verdict(
@@ -189,8 +220,11 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
             noise = float(round_off @ np.abs(step))
             state.copy_from(trial)
             total_descent += descent
+            if system.contact_coo and a == 1.0 and dt >= options.dt_max and residual < EXACT_CONTACT_BELOW:
+                exact_contact = True
             # trust the pseudo-time step more after a full step, less after a backtrack
-            dt = min(options.dt_max, dt * options.dt_growth) if a == 1.0 else max(dt * a, 1e-12)
+            # (a step cut by the CCD bound alone, a == a_start < 1, is a full step of the linearised model)
+            dt = min(options.dt_max, dt * options.dt_growth) if a == a_start else max(dt * a / a_start, 1e-12)
     except INTERRUPTS as exc:
         if not is_interrupt(exc):
             raise
@@ -204,3 +238,39 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     return final_result(system, state, status, residual=float(residual), iterations=it,
                         wall_time=time.perf_counter() - t_start, message=message, solver="implicit", strain=strain,
                         history=history, dt=dt, residual_floor=float(floor))
+
+
+# ---- contact (issue 14): the sparse path, taken only while a contact term reports off-band triplets ----
+
+def _coo_diagonal(coo, n):
+    """Diagonal of the contact Hessian (PSD: non-negative), for the pseudo-time damping D = diag(|K|)."""
+    out = np.zeros(n)
+    for r, c, v in coo:
+        on = r == c
+        out += np.bincount(r[on], weights=v[on], minlength=n)
+    return out
+
+
+def _contact_solve(system, work, coo, R):
+    """Solve (K + D/dt + H_contact) delta = R: the constrained band (fixed DOFs already identity rows and
+    columns, the pseudo-time diagonal included) plus the contact triplets off the fixed DOFs, as one CSC matrix
+    factorised by scipy's splu (SuperLU, COLAMD ordering). Returns (delta, info) like band_solve."""
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import splu
+
+    n = work.shape[1]
+    rb, cb, vb = band_to_coo(work, system.kl, system.ku, system.perm)
+    rows, cols, vals = [rb], [cb], [vb]
+    fixed = system.fixed
+    for r, c, v in coo:
+        keep = ~(fixed[r] | fixed[c])
+        rows.append(r[keep])
+        cols.append(c[keep])
+        vals.append(v[keep])
+    A = sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+    system.linear_solves["sparse"] += 1
+    try:
+        lu = splu(A, permc_spec="COLAMD")
+    except RuntimeError:          # exactly singular
+        return np.zeros(n), 1
+    return lu.solve(R), 0

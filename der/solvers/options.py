@@ -171,11 +171,19 @@ class SolveResult:
         of the stiffness pencil (K, M), i.e. squared natural frequencies, with rigid-body and other symmetry
         modes removed. ``stable`` is False if one has a negative real part (divergence); ``flutter`` is True if
         complex eigenvalues appear among the lowest (circulatory loads: the undamped rod would flutter).
+    stability_time : seconds spent in the stability analysis (not part of ``wall_time``; 0 if not run).
     energy : energy by term at the final state.
     history : residual after each iteration/check.
     compile_time : seconds spent compiling (or loading from numba's cache) der's kernels before this solve,
         on the first solve of a process; never part of ``wall_time``. 0 afterwards.
     tol : the residual tolerance the solve was asked for.
+    reactions : one dict per constraint: ``support``, ``end`` (or ``node``/``edge``), ``at``, ``force`` and
+        ``moment`` (lab frame, what the support exerts on the rod, moment about ``at``: the end cross-section's
+        centre for clamps, hinges and rollers); see ``der.solvers.system.support_reactions``.
+    contact : with contact terms, ``der.diagnostics.contact_forces`` at the final state (pairs in contact,
+        force per pair and per length, minimal distance, per term); None otherwise.
+    linear_solves : how many Newton systems the implicit solver factorised on the banded path and on the
+        sparse (contact) path.
 
     ``print(result)`` shows a short summary (``repr``); the arrays are attributes (``result.state``,
     ``result.eigenvalues``, ``result.history``).
@@ -215,8 +223,12 @@ class SolveResult:
     dt: float | None = None
     residual_floor: float = float("nan")
     residual_per_length: float = float("nan")
+    stability_time: float = 0.0
     compile_time: float = 0.0
+    reactions: list = field(default_factory=list)
     tol: float = float("nan")
+    contact: dict | None = None         # contact diagnostics (issue 14; None for a scene without contact)
+    linear_solves: dict = field(default_factory=dict)   # implicit: {"band": count, "sparse": count}
 
     def __repr__(self):
         """One short paragraph: status, residual against tol, iterations, times, stability, message."""

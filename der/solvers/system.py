@@ -20,12 +20,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constraints import apply_targets, fixed_dofs
+from ..constraints import NO_LINKS, apply_targets, build_links, enforce_links
 from ..diagnostics import _edge_forces
 from ..energies.stretch import elongations
 from ..geometry import edge_frames, transport_frames
-from ..linalg import band_layout, band_matvec, new_band
-from ..loads import DistributedForce, EndForce, EndTorque, PointForce, TwistingMoment
+from ..linalg import band_layout, band_matvec, condense_band, condense_vector, constrain_band, expand_step, new_band
+from ..loads import DistributedForce, EndForce, EndTorque, FollowerForce, PointForce, PointTorque, TwistingMoment
 from ..scene import COUNTER_NAMES, evaluate, make_plan
 
 
@@ -48,6 +48,8 @@ class System:
     grad: np.ndarray
     fext: np.ndarray
     ab: np.ndarray
+    links: object = NO_LINKS   # the end supports' dependents (constraints.Links): q = c + T y
+    mass_full: np.ndarray = None   # lumped mass before condensation (``mass`` is T^T M T, lumped)
 
     @property
     def n_dof(self):
@@ -60,10 +62,22 @@ class System:
 
 def axial_penalty(rod, options):
     """Per-edge axial stiffness k_j: EA / l_j for an extensible rod, the augmented-Lagrangian penalty
-    ``c A1 / l_j^3`` for an inextensible one."""
+    ``c A1 / l_j^3`` for an inextensible one.
+
+    The end edges of an open extensible rod count half: only their inner half lies in [0, L] (their midpoints
+    are the end cross-sections), so the stretch energy is the midpoint rule for the integral of EA/2 eps^2 over
+    [0, L], like bending and twisting. With it a uniform bar pulled by an end force P (half on each node of the
+    end edge) has the strain P/EA in every edge, end edges included, and its ends' centres move apart by exactly
+    P L / EA (issue 13: with full-weight end edges the end edges carried P/2 and the bar stretched 1% short at
+    n = 50)."""
     if rod.inextensible:
         return options.inextensible_penalty * rod.A1 / rod.l_bar ** 3
-    return rod.EA / rod.l_bar
+    k = np.broadcast_to(np.asarray(rod.EA, float), rod.l_bar.shape) / rod.l_bar
+    if not rod.closed:
+        k = k.copy()
+        k[0] *= 0.5
+        k[-1] *= 0.5
+    return k
 
 
 def rotational_inertia(rod):
@@ -106,8 +120,10 @@ def applied_scales(scene):
             f = safe_norm(load.force)
         elif isinstance(load, DistributedForce):
             f = safe_norm(load.density) * L
-        elif isinstance(load, EndTorque):
-            m = abs(float(load.torque)) if load.follower else safe_norm(load.torque)
+        elif isinstance(load, (EndTorque, PointTorque)):
+            m = abs(float(load.torque)) if np.ndim(load.torque) == 0 else safe_norm(load.torque)
+        elif isinstance(load, FollowerForce):
+            f = safe_norm(load.density) * L
         elif isinstance(load, TwistingMoment):
             m = abs(load.density) * L
         if not (np.isfinite(f) and np.isfinite(m) and np.isfinite(f * L) and np.isfinite(m / L)):
@@ -122,7 +138,7 @@ def build_system(scene, options):
     rod = scene.rod
     k = axial_penalty(rod, options)
     plan = make_plan(scene, k)
-    fixed = fixed_dofs(rod, scene.constraints)
+    fixed, links = build_links(rod, scene.constraints)
     kl, ku, perm = band_layout(rod.n_nodes, rod.closed)
     n = rod.n_dof
     L = rod.length
@@ -140,15 +156,84 @@ def build_system(scene, options):
     mass[4 * np.arange(rod.n_edges) + 3] = rotational_inertia(rod) * rod.l_bar
     F_app, M_app = applied_scales(scene)
     system = System(scene, rod, plan, fixed, ~fixed, kl, ku, perm, plan.k_stretch, weights, is_theta, mass, F_app,
-                    M_app, np.zeros(n), np.zeros(n), new_band(n, kl, ku))
+                    M_app, np.zeros(n), np.zeros(n), new_band(n, kl, ku), links, mass.copy())
+    system.mass = condensed_mass(system)
     system.k_initial = plan.k_stretch.copy()
+    # contact terms (der/terms), bound for this solve; () for a scene without contact (nothing is imported)
+    system.terms = tuple(term.bind(system) for term in scene.contacts)
+    system.contact_coo = []
+    system.linear_solves = {"band": 0, "sparse": 0}
     return system
 
 
+def condensed_mass(system):
+    """The lumped mass in the free variables y of q = c + T y: diag(T^T M T), i.e. M_m + sum_d a_dm^2 M_d (a
+    master of a hinge carries its dependent's mass too); 1 on held DOFs."""
+    m = system.mass_full.copy()
+    lk = system.links
+    np.add.at(m, lk.tri_master, lk.tri_coef ** 2 * system.mass_full[lk.tri_dep])
+    return m
+
+
+def update_links(system, state):
+    """Recompute the end supports' links (and the held mask and condensed mass) at the prepared ``state``
+    (whose targets are applied): a clamp holds its end edge along its current direction."""
+    fixed, links = build_links(system.rod, system.scene.constraints, state)
+    system.fixed = fixed
+    system.free = ~fixed
+    system.links = links
+    system.mass = condensed_mass(system)
+
+
+def condense_system_band(system, ab):
+    """ab <- T^T ab T for the end supports' change of variables (rows and columns of held DOFs untouched):
+    the full-space Jacobian mapped to the free variables, in the same band storage. For the stability analysis
+    and the solvers; with no end supports it does nothing (the plain ``fixed`` mask is all there is)."""
+    lk = system.links
+    if lk.tri_dep.size:
+        condense_band(ab, system.kl, system.ku, system.perm, lk.tri_dep, lk.tri_master, lk.tri_coef)
+    return ab
+
+
+def constrain_system(system, ab, diag):
+    """ab <- T^T ab T with the rows and columns of held DOFs replaced by ``diag`` times identity."""
+    condense_system_band(system, ab)
+    constrain_band(ab, system.kl, system.ku, system.perm, system.fixed, diag)
+    return ab
+
+
+def condense_forces(system, r):
+    """r <- T^T r on the free variables, zero on held DOFs (in place): a generalized force on the free space."""
+    lk = system.links
+    condense_vector(r, lk.tri_dep, lk.tri_master, lk.tri_coef, system.fixed)
+    return r
+
+
+def expand(system, delta):
+    """delta <- T delta (in place): a step in the free variables (zero on held DOFs) as a step of q."""
+    lk = system.links
+    if lk.tri_dep.size:
+        expand_step(delta, lk.tri_dep, lk.tri_master, lk.tri_coef)
+    return delta
+
+
 def evaluate_system(system, state, order):
-    """Energy; fills system.grad, system.fext (and system.ab with order 2)."""
-    return evaluate(system.plan, state.q, state.d1, state.reference_twist, state.lam, order, system.grad,
-                    system.fext, system.ab, system.kl, system.ku, system.perm)
+    """Energy; fills system.grad, system.fext (and system.ab with order 2). With contact terms their energy,
+    gradient and band-local Hessian blocks are added, and their off-band Hessian triplets are left in
+    ``system.contact_coo`` (a list of (rows, cols, vals); empty while no pair is active)."""
+    energy = evaluate(system.plan, state.q, state.d1, state.reference_twist, state.lam, order, system.grad,
+                      system.fext, system.ab, system.kl, system.ku, system.perm)
+    if system.terms:
+        if order >= 2:
+            system.contact_coo = []
+        for term in system.terms:
+            energy += term.evaluate(state, order, system.grad, system.ab, system.contact_coo)
+    return energy
+
+
+def contact_force_scale(system):
+    """The largest contact force on a node at the last evaluation (0 without contact terms)."""
+    return max((t.force_scale for t in system.terms), default=0.0)
 
 
 def load_scales(system, state):
@@ -160,7 +245,18 @@ def load_scales(system, state):
     f_int = float(row_norms(F).max()) if F.size else 0.0
     m_int = float(M.max()) if M.size else 0.0
     L = rod.length
-    F_raw = max(system.applied_force, f_int)
+    # internal forces no larger than their own round-off (rounding every coordinate by eps |x| moves a node
+    # force by ~ eps |x| (A / h^3 + k) and a moment by ~ eps |x| A / h^2) define no scale: an unloaded rod at
+    # rest would otherwise be judged against its round-off, with a residual of order 1 for ever
+    X = max(float(np.abs(state.q.reshape(-1, 4)[:, :3]).max()), L)
+    h = float(rod.l_bar.min())
+    A = max(rod.A1, rod.A2)
+    eps100 = 100.0 * np.finfo(float).eps
+    if f_int <= eps100 * X * (A / h ** 3 + float(plan.k_stretch.max(initial=0.0))):
+        f_int = 0.0
+    if m_int <= eps100 * X * A / h ** 2:
+        m_int = 0.0
+    F_raw = max(system.applied_force, f_int, contact_force_scale(system))   # contact forces are loads too
     M_raw = max(system.applied_moment, m_int)
     if F_raw == 0.0 and M_raw == 0.0:
         return rod.A1 / L ** 2, rod.A1 / L
@@ -170,10 +266,8 @@ def load_scales(system, state):
 
 
 def residual_vector(system):
-    """R = f_ext - dE/dq on the free DOFs (zero on fixed ones), from the last evaluation."""
-    R = system.fext - system.grad
-    R[system.fixed] = 0.0
-    return R
+    """R = T^T (f_ext - dE/dq) on the free DOFs (zero on held ones), from the last evaluation."""
+    return condense_forces(system, system.fext - system.grad)
 
 
 def residual_norm(system, R, scales, per_length=False):
@@ -190,7 +284,8 @@ def floor_forces(system, state):
     coordinate, zero on fixed DOFs. Needs ``system.ab`` evaluated at ``state``."""
     out = np.empty(system.n_dof)
     band_matvec(system.ab, system.kl, system.ku, system.perm, state.q, out, True)
-    out[system.fixed] = 0.0
+    lk = system.links
+    condense_vector(out, lk.tri_dep, lk.tri_master, np.abs(lk.tri_coef), system.fixed)
     return np.finfo(float).eps * out
 
 
@@ -206,7 +301,7 @@ def newton_error_estimate(system, state):
     (max norm over node positions and, times the rod length, edge angles): an estimate of the error left,
     dominated by the slowest modes. Rigid-body
     and other symmetry modes of an unconstrained rod are projected out (they carry no error)."""
-    from ..linalg import add_diagonal, band_solve, constrain_band
+    from ..linalg import add_diagonal, band_solve
     from .stability import symmetry_modes
 
     evaluate_system(system, state, 2)
@@ -219,10 +314,11 @@ def newton_error_estimate(system, state):
     diag = np.abs(ab[system.kl + system.ku, :][system.perm])
     diag[diag == 0] = 1.0
     add_diagonal(ab, system.kl, system.ku, system.perm, diag, 1e-14)   # regularises the symmetry modes
-    constrain_band(ab, system.kl, system.ku, system.perm, system.fixed, 1.0)
+    constrain_system(system, ab, 1.0)
     delta, info = band_solve(ab, system.kl, system.ku, system.perm, R)
     if info != 0 or not np.all(np.isfinite(delta)):
         return np.inf
+    expand(system, delta)
     if V.shape[1]:
         delta = delta - Q @ (Q.T @ delta)
     # displacement and rotation (times the rod length) from the rest shape, against the same of the correction
@@ -292,8 +388,57 @@ def final_result(system, state, status, **fields):
         status = "nonfinite"
         fields["message"] = f"the force scale became non-finite ({scales[0]:.3g}, {scales[1]:.3g}); no verdict"
     per_length = residual_norm(system, residual_vector(system), scales, per_length=True)
+    fields.setdefault("reactions", support_reactions(system, state))
     return SolveResult(state=state, converged=status in CONVERGED_STATUSES, status=status, load_scale=float(scales[0]),
                        energy=energy_terms(system, state), residual_per_length=per_length, **fields)
+
+
+def support_reactions(system, state):
+    """The reaction of every constraint at ``state``, from the last order >= 1 evaluation (``system.grad`` and
+    ``system.fext`` at ``state``): a list of dicts, one per constraint in the scene's order, with
+
+    ``support`` ("clamp", "hinge", "roller", "pin", "fix_theta"), ``end`` ("start"/"end") or ``node`` or
+    ``edge``, ``at`` (the point the moment is taken about: the end cross-section's centre, the pinned node, the
+    edge midpoint), ``force`` and ``moment`` (3-vectors, lab frame: what the support exerts ON the rod).
+
+    A support's reaction is the generalized force its constraint adds so that the rod is in equilibrium,
+    ``grad E - f_ext`` on the entries it acts on (the two nodes of the end edge and, for a clamp, the end angle
+    theta, whose generalized force is the moment about the end tangent). Its moment about ``at`` is
+    ``sum (x_k - at) x f_k + f_theta t``. Because the elastic energy does not change under rigid motions, the
+    reactions and the loads balance exactly (to the residual), forces and moments; and since ``at`` is the
+    end cross-section itself the moment needs no transport (second order like the solution). Two constraints
+    on the same node both report the force on it."""
+    from ..constraints import Clamp, EndSupport, FixTheta, Pin, end_centre, support_dofs
+
+    rod = system.rod
+    f = system.grad - system.fext
+    x = state.positions
+    out = []
+    for c in system.scene.constraints:
+        nodes, edge = support_dofs(rod, c)
+        if isinstance(c, (Clamp, EndSupport)):
+            at = end_centre(x, rod, c.end)
+            entry = {"support": "clamp" if isinstance(c, Clamp) else c.kind, "end": c.end}
+        elif isinstance(c, Pin):
+            at = x[nodes[0]].copy()
+            entry = {"support": "pin", "node": int(nodes[0])}
+        elif isinstance(c, FixTheta):
+            a, b = rod.edge_nodes[edge]
+            at = 0.5 * (x[a] + x[b])
+            entry = {"support": "fix_theta", "edge": int(edge)}
+        else:
+            continue
+        force = np.zeros(3)
+        moment = np.zeros(3)
+        for k in nodes:
+            fk = f[4 * k:4 * k + 3]
+            force += fk
+            moment += np.cross(x[k] - at, fk)
+        if edge is not None:
+            moment += f[4 * edge + 3] * state.tangents[edge]
+        entry.update(at=at, force=force, moment=moment)
+        out.append(entry)
+    return out
 
 
 def max_strain(system, state):
@@ -374,6 +519,11 @@ def prepare_state(system, state):
         target = np.arctan2(m1 @ d2, m1 @ d1)
         current = work.q[4 * j + 3]
         work.q[4 * j + 3] = current + (target - current + np.pi) % (2 * np.pi) - np.pi
+    update_links(system, work)
+    if system.links.dep.size:
+        enforce_links(work.q, system.links)
+        base = work.copy()
+        transport(system, base, work.q, work)
     return work
 
 
@@ -393,6 +543,8 @@ def energy_terms(system, state):
     if plan.has_twist:
         out["twist"] = float(twist_energy(state.q, rod.vertex_edges, state.reference_twist, plan.weld, rod.twist_bar,
                                           rod.voronoi, rod.A2))
+    if system.terms:
+        out["contact"] = float(sum(t.evaluate(state, 0, None, None, None) for t in system.terms))
     return out
 
 
@@ -422,7 +574,7 @@ def check_equilibrium_exists(system, state):
             # the total the rod receives: the density times the length its nodes stand for (make_plan's lumping)
             f = np.asarray(load.density, float) * float(rod.node_weights().sum())
         else:
-            if isinstance(load, EndTorque) and not load.follower:
+            if isinstance(load, (EndTorque, PointTorque)) and not load.follower:
                 net_torque += np.asarray(load.torque, float)
                 torque_total += safe_norm(load.torque)
             else:
@@ -433,10 +585,10 @@ def check_equilibrium_exists(system, state):
         if np.any(f != 0.0):
             conservative_torques_only = False        # forces have a moment that depends on the configuration
     what = "an unconstrained rod" if not fixed.any() else None
-    free_axes = [a for a in range(3) if not fixed.reshape(-1, 4)[:, a].any()]
-    bad = [a for a in free_axes if abs(net_force[a]) > 1e-12 * total]
+    bad = [u for u in free_translations(system) if abs(u @ net_force) > 1e-12 * total]
     if bad:
-        where = what or f"a rod whose constraints cannot react along {', '.join('xyz'[a] for a in bad)}"
+        names = ["xyz"[int(np.argmax(np.abs(u)))] if np.abs(u).max() > 1 - 1e-12 else _fmt_vector(u) for u in bad]
+        where = what or f"a rod whose constraints cannot react along {', '.join(names)}"
         raise ValueError(f"net applied force {_fmt_vector(net_force)} on {where}: no static equilibrium exists "
                          "(add a clamp or pin that can react, or balance the loads)")
     if conservative_torques_only and torque_total > 0.0:
@@ -448,13 +600,58 @@ def check_equilibrium_exists(system, state):
                              "it: no static equilibrium exists (add a clamp, or balance the torques)")
 
 
+def _violation(system, v):
+    """How far the motion ``v`` (n_dof) breaks the constraints: its entries on plainly held DOFs and, on the end
+    supports' dependents, v_d - sum a v_m (a motion the supports allow has q = c + T y, so v = T y)."""
+    lk = system.links
+    held = system.fixed.copy()
+    if not system.rod.closed:
+        held[4 * system.rod.n_nodes - 1] = False     # the dummy slot is not a constraint
+    held[lk.dep] = False
+    linked = v[lk.dep].astype(float)
+    pos = {int(d): i for i, d in enumerate(lk.dep)}
+    for d, m, a in zip(lk.tri_dep, lk.tri_master, lk.tri_coef):
+        linked[pos[int(d)]] -= a * v[m]
+    return np.concatenate([v[held], linked])
+
+
+def free_translations(system):
+    """Orthonormal rows (k, 3): the rigid translations the constraints leave free (for a roller along a line
+    not on a coordinate axis, that line's direction)."""
+    rod = system.rod
+    C = []
+    for a in range(3):
+        v = np.zeros(rod.n_dof)
+        v.reshape(-1, 4)[:, a] = 1.0
+        if not rod.closed:
+            v[4 * rod.n_nodes - 1] = 0.0
+        C.append(_violation(system, v))
+    C = np.array(C).T
+    if C.size == 0:
+        return np.eye(3)
+    _, sv, vt = np.linalg.svd(C)
+    rank = int(np.sum(sv > 1e-12 * max(sv.max(initial=0.0), 1.0)))
+    U = vt[rank:]
+    U[np.abs(U) < 1e-12] = 0.0
+    return U * np.where(U[np.arange(len(U)), np.argmax(np.abs(U), axis=1)] < 0, -1.0, 1.0)[:, None]
+
+
 def _rotation_is_free(system, state, fixed, a):
-    """Whether a rigid rotation about coordinate axis ``a`` -- about the one pinned node, or the centroid -- moves
-    no fixed DOF (the centre used by ``stability.symmetry_modes``)."""
+    """Whether a rigid rotation about coordinate axis ``a`` -- about the one pinned node or the one end support's
+    centre, or the centroid -- moves no held DOF and keeps the end supports' links (the centre used by
+    ``stability.symmetry_modes``)."""
+    from ..constraints import END_SUPPORTS, end_centre
+
     rod = system.rod
     x = state.positions
-    pinned = [k for k in range(rod.n_nodes) if fixed[4 * k:4 * k + 3].all()]
-    centre = x[pinned[0]] if len(pinned) == 1 else x.mean(axis=0)
+    supports = [c for c in system.scene.constraints if isinstance(c, END_SUPPORTS)]
+    held = fixed.copy()
+    held[system.links.dep] = False
+    pinned = [k for k in range(rod.n_nodes) if held[4 * k:4 * k + 3].all()]
+    if len(supports) == 1 and not pinned:
+        centre = end_centre(x, rod, supports[0].end)
+    else:
+        centre = x[pinned[0]] if len(pinned) == 1 else x.mean(axis=0)
     w = np.zeros(3)
     w[a] = 1.0
     v = np.zeros(rod.n_dof)
@@ -462,7 +659,7 @@ def _rotation_is_free(system, state, fixed, a):
     v[4 * np.arange(rod.n_edges) + 3] = state.tangents @ w
     if not rod.closed:
         v[4 * rod.n_nodes - 1] = 0.0
-    return bool(np.abs(v[fixed]).max(initial=0.0) < 1e-12 * np.abs(v).max())
+    return bool(np.abs(_violation(system, v)).max(initial=0.0) < 1e-12 * np.abs(v).max())
 
 
 # constraint tension against the larger of the bending scale A1/L^2 and the applied load scale above which an
@@ -492,3 +689,26 @@ def locked_rod_note(system, state):
     return (f"the inextensible rod is locked between fixed ends; give it EA or a sliding clamp (its constraint "
             f"tension {tension:.3g} is {tension / bending:.3g} times the bending scale A1/L^2 = {bending:.3g}, "
             f"and its loads apply at most {loads:.3g})")
+
+
+def numerical_failure(system, state, start, exc, solver):
+    """The SolveResult of a solve that a numerical error ended (a division by zero or a failed factorisation
+    inside a kernel, e.g. dependent constraints: an inextensible rod held straight between two fixed nodes has
+    an indeterminate tension): status "nonfinite", the state the solver was at if it is finite (else the start),
+    never an exception from inside the solve."""
+    if solver == "explicit" and system.rod.inextensible:
+        system.plan.k_stretch[:] = system.k_initial    # the projected explicit solve zeroes the penalty
+        state.penalty = system.k_initial.copy()
+    finite = all(np.isfinite(a).all() for a in (state.q, state.d1, state.reference_twist, state.lam))
+    kept = state if finite else start
+    try:
+        evaluate_system(system, kept, 1)
+    except ArithmeticError:            # finite, but degenerate (an edge collapsed): back to the start
+        kept, finite = start, False
+        evaluate_system(system, kept, 1)
+    residual = residual_norm(system, residual_vector(system), load_scales(system, kept))
+    return final_result(system, kept, "nonfinite", residual=float(residual), iterations=0, wall_time=0.0,
+                        message=f"numerical failure in the {solver} solver ({type(exc).__name__}: {exc}); "
+                        f"{'the last' if finite else 'the starting'} finite state is kept (dependent constraints, "
+                        "e.g. an inextensible rod held straight between fixed nodes, make its tension "
+                        "indeterminate: give it EA)", solver=solver)

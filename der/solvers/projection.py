@@ -1,0 +1,233 @@
+"""Inextensibility as a constraint for the explicit solver: projections onto the edge-length manifold.
+
+The constraints are ``g_j(q) = |e_j| - l_j = 0`` for every edge j. Their Jacobian ``C`` has the row
+``(-t_j, +t_j)`` on the two nodes of edge j (t_j the unit tangent), so with the inverse lumped mass ``W``
+(zero on fixed DOFs) the matrix ``A = C W C^T`` is tridiagonal for an open rod and cyclic tridiagonal for a
+ring: every projection is one O(n) solve.
+
+* ``project_force``: splits a generalized force f into its part tangent to the manifold,
+  ``f - C^T mu`` with ``mu = A^-1 C W f``; ``mu`` is the multiplier (the edge tension, force units, positive
+  in tension) that balances f at equilibrium, the same ``lam`` as the stretch energy's ``lam_j g_j``.
+* ``project_positions``: the fast projection of Goldenthal et al. 2007 ("Efficient simulation of inextensible
+  cloth"): ``q <- q - W C(q)^T A(q)^-1 g(q)`` repeated (a Newton iteration on the mass-weighted closest point
+  of the manifold), quadratically convergent.
+* ``project_velocity``: the RATTLE step, ``v <- v - W C^T A^-1 C v``: the velocity made tangent to the
+  manifold at the projected positions (the M-orthogonal projection, so it can only lower the kinetic energy).
+
+Edges whose two nodes are both fully fixed (a clamp) have a zero row; their multiplier is left at 0 and their
+length is whatever the constraints hold (``held_strain`` reports it).
+All kernels work on the flat state vector ``q`` (4 entries per node: x, y, z, theta) and skip theta.
+"""
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def _tangents(q, edge_nodes, l_bar, w, t, g):
+    """Unit tangents t (ne, 3) and elongations g (ne,) at q; returns max |g_j| / l_j over the edges that can move
+    (some inverse mass w > 0 on their nodes), inf if an edge vanished."""
+    worst = 0.0
+    for j in range(edge_nodes.shape[0]):
+        a = 4 * edge_nodes[j, 0]
+        b = 4 * edge_nodes[j, 1]
+        e0 = q[b] - q[a]
+        e1 = q[b + 1] - q[a + 1]
+        e2 = q[b + 2] - q[a + 2]
+        le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        if not le > 0.0:
+            return np.inf
+        t[j, 0] = e0 / le
+        t[j, 1] = e1 / le
+        t[j, 2] = e2 / le
+        g[j] = le - l_bar[j]
+        r = abs(g[j]) / l_bar[j]
+        movable = False
+        for c in range(3):
+            if w[a + c] > 0.0 or w[b + c] > 0.0:
+                movable = True
+        if movable and r > worst:
+            worst = r
+    return worst
+
+
+@njit(cache=True)
+def _assemble(edge_nodes, t, w, closed, diag, off):
+    """A = C W C^T: diag[j] = A_jj, off[j] = A_{j, j+1} (cyclic for a ring; off[-1] unused for an open rod).
+    Zero rows (both nodes fixed) get diag 1: with a zero right-hand side their multiplier stays 0."""
+    ne = edge_nodes.shape[0]
+    for j in range(ne):
+        a = 4 * edge_nodes[j, 0]
+        b = 4 * edge_nodes[j, 1]
+        d = 0.0
+        for c in range(3):
+            d += t[j, c] * t[j, c] * (w[a + c] + w[b + c])
+        diag[j] = d if d > 0.0 else 1.0
+        off[j] = 0.0
+    n_off = ne if closed else ne - 1
+    for j in range(n_off):
+        k = (j + 1) % ne
+        s = 4 * edge_nodes[j, 1]          # the node shared by edges j (its end) and k (its start)
+        o = 0.0
+        for c in range(3):
+            o -= t[j, c] * t[k, c] * w[s + c]
+        off[j] = o
+
+
+@njit(cache=True)
+def _solve(diag, off, rhs, closed, x, work_c, work_d):
+    """Solve the symmetric (cyclic) tridiagonal system A x = rhs (A from ``_assemble``). Thomas' algorithm
+    (A is symmetric positive definite when the constraints are independent); a ring by Sherman-Morrison on
+    the corner entries."""
+    n = diag.shape[0]
+    if not closed or n < 3:
+        _thomas(diag, off, rhs, x, work_c, work_d, 0.0, 0.0)
+        return
+    # A = T + u v^T, u = (gamma, 0, ..., 0, corner), v = (1, 0, ..., 0, corner / gamma): T is tridiagonal with
+    # diag[0] - gamma and diag[-1] - corner^2 / gamma
+    corner = off[n - 1]
+    gamma = -diag[0]
+    y = np.empty(n)
+    z = np.empty(n)
+    u = np.zeros(n)
+    u[0] = gamma
+    u[n - 1] = corner
+    _thomas(diag, off, rhs, y, work_c, work_d, -gamma, corner * corner / gamma)
+    _thomas(diag, off, u, z, work_c, work_d, -gamma, corner * corner / gamma)
+    fact = (y[0] + corner / gamma * y[n - 1]) / (1.0 + z[0] + corner / gamma * z[n - 1])
+    for i in range(n):
+        x[i] = y[i] - fact * z[i]
+
+
+@njit(cache=True)
+def _thomas(diag, off, rhs, x, c, d, shift0, shiftn):
+    """Tridiagonal solve with diag[0] += shift0 and diag[-1] -= shiftn (off[j] couples j and j+1)."""
+    n = diag.shape[0]
+    b0 = diag[0] + shift0
+    if n == 1:
+        x[0] = rhs[0] / (b0 - shiftn)
+        return
+    c[0] = off[0] / b0
+    d[0] = rhs[0] / b0
+    for i in range(1, n):
+        bi = diag[i] - (shiftn if i == n - 1 else 0.0)
+        m = bi - off[i - 1] * c[i - 1]
+        if i < n - 1:
+            c[i] = off[i] / m
+        d[i] = (rhs[i] - off[i - 1] * d[i - 1]) / m
+    x[n - 1] = d[n - 1]
+    for i in range(n - 2, -1, -1):
+        x[i] = d[i] - c[i] * x[i + 1]
+
+
+@njit(cache=True)
+def _c_times(edge_nodes, t, u, out):
+    """out = C u: the rate of change of each edge length along u."""
+    for j in range(edge_nodes.shape[0]):
+        a = 4 * edge_nodes[j, 0]
+        b = 4 * edge_nodes[j, 1]
+        s = 0.0
+        for c in range(3):
+            s += t[j, c] * (u[b + c] - u[a + c])
+        out[j] = s
+
+
+@njit(cache=True)
+def _add_ct(edge_nodes, t, mu, scale, w, out):
+    """out += scale * W C^T mu (w = None-like: pass ones for plain C^T mu)."""
+    for j in range(edge_nodes.shape[0]):
+        a = 4 * edge_nodes[j, 0]
+        b = 4 * edge_nodes[j, 1]
+        for c in range(3):
+            h = scale * mu[j] * t[j, c]
+            out[a + c] -= h * w[a + c]
+            out[b + c] += h * w[b + c]
+
+
+@njit(cache=True)
+def project_force(q, edge_nodes, l_bar, w, closed, f, mu):
+    """f <- f - C^T mu with mu = A^-1 C W f (mu written to ``mu``): the part of the force f that does work along
+    the manifold. At an equilibrium the remainder vanishes and mu is the edge tension. ``w`` is the inverse
+    mass, zero on fixed DOFs (f must be zero there too). Returns False if an edge vanished."""
+    ne = edge_nodes.shape[0]
+    t = np.empty((ne, 3))
+    g = np.empty(ne)
+    if not np.isfinite(_tangents(q, edge_nodes, l_bar, w, t, g)):
+        return False
+    diag = np.empty(ne)
+    off = np.empty(ne)
+    _assemble(edge_nodes, t, w, closed, diag, off)
+    wf = f * w
+    rhs = np.empty(ne)
+    _c_times(edge_nodes, t, wf, rhs)
+    _solve(diag, off, rhs, closed, mu, np.empty(ne), np.empty(ne))
+    ones = np.ones(f.shape[0])
+    _add_ct(edge_nodes, t, mu, -1.0, ones, f)
+    for i in range(f.shape[0]):
+        if w[i] == 0.0:
+            f[i] = 0.0
+    return True
+
+
+@njit(cache=True)
+def project_positions(q, edge_nodes, l_bar, w, closed, max_iter, target):
+    """Fast projection of q onto |e_j| = l_j (in place; fixed DOFs, w = 0, never move). Iterates while the
+    largest strain exceeds ``target``, at most ``max_iter`` times, and stops early where it no longer falls
+    fourfold below 1e-9 (the round-off floor).
+    Returns the largest |strain| left (inf if an edge vanished)."""
+    ne = edge_nodes.shape[0]
+    t = np.empty((ne, 3))
+    g = np.empty(ne)
+    diag = np.empty(ne)
+    off = np.empty(ne)
+    dl = np.empty(ne)
+    wc = np.empty(ne)
+    wd = np.empty(ne)
+    worst = _tangents(q, edge_nodes, l_bar, w, t, g)
+    for it in range(max_iter):
+        if not np.isfinite(worst) or worst <= target:
+            break
+        _assemble(edge_nodes, t, w, closed, diag, off)
+        _solve(diag, off, g, closed, dl, wc, wd)
+        _add_ct(edge_nodes, t, dl, -1.0, w, q)
+        new = _tangents(q, edge_nodes, l_bar, w, t, g)
+        stuck = not new < 0.25 * worst
+        worst = new
+        if stuck and worst < 1e-9:    # no longer quadratic at this size: the round-off floor
+            break
+    return worst
+
+
+@njit(cache=True)
+def project_velocity(q, edge_nodes, l_bar, w, closed, v):
+    """v <- v - W C^T A^-1 C v (RATTLE): the velocity made tangent to the manifold at q, in place."""
+    ne = edge_nodes.shape[0]
+    t = np.empty((ne, 3))
+    g = np.empty(ne)
+    if not np.isfinite(_tangents(q, edge_nodes, l_bar, w, t, g)):
+        return False
+    diag = np.empty(ne)
+    off = np.empty(ne)
+    _assemble(edge_nodes, t, w, closed, diag, off)
+    rhs = np.empty(ne)
+    _c_times(edge_nodes, t, v, rhs)
+    mu = np.empty(ne)
+    _solve(diag, off, rhs, closed, mu, np.empty(ne), np.empty(ne))
+    _add_ct(edge_nodes, t, mu, -1.0, w, v)
+    return True
+
+
+def held_strain(rod, state, w):
+    """(edges, strains): the edges whose nodes are fully fixed (no projection can change their length) and the
+    strain the constraints hold them at."""
+    wn = w.reshape(-1, 4)[:, :3]
+    held = np.flatnonzero(~(wn[rod.edge_nodes[:, 0]].any(axis=1) | wn[rod.edge_nodes[:, 1]].any(axis=1)))
+    x = state.q.reshape(-1, 4)[:, :3]
+    length = np.linalg.norm(x[rod.edge_nodes[held, 1]] - x[rod.edge_nodes[held, 0]], axis=1)
+    return held, np.abs(length - rod.l_bar[held]) / rod.l_bar[held]
+
+
+def inverse_mass(system):
+    """Inverse lumped mass per DOF, zero on the fixed ones (they take no constraint impulse)."""
+    w = 1.0 / system.mass
+    w[system.fixed] = 0.0
+    return w

@@ -1,0 +1,287 @@
+"""Self-contact of a rod: no two non-neighbouring parts come closer than 2r between centrelines, and no strand
+passes through another within a step (IPC: Li et al. 2020). The barrier kappa b(gap; dhat) on the gap
+dist - 2r of every edge pair within dhat (GAP variable, der/contact/barrier.py), its PSD-projected Hessian as
+COO triplets (the solver then factorises a sparse matrix), and a CCD bound on every step (der/contact/ccd.py).
+Design and the choice of dhat and kappa: docs/contact.md, section 6.
+"""
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import validate
+from . import register
+
+# dhat = DHAT_FRACTION r by default: the range of the contact force, and the bound on its geometric error
+DHAT_FRACTION = 0.1
+# CCD: every gap keeps at least this fraction of its start value over a step
+MIN_GAP_FRACTION = 0.1
+KAPPA_RANGE = 100.0          # kappa_max / kappa_min
+# b''(dhat / 2) / 1 for the GAP barrier: (q + 2) q - 2 log(1/q) - 3 at q = zh / z = 2
+_B2_HALF = 8.0 + 2.0 * math.log(2.0) - 3.0
+
+
+def positive_radius(value, name):
+    value = validate.finite_number(value, name)
+    if not value > 0:
+        raise ValueError(f"{name} must be a positive finite length (the rod's radius); got {value!r}")
+    return float(value)
+
+
+def stiffness_bounds(system, dhat):
+    """(kappa_min, kappa_max) of the adaptive barrier stiffness (docs/contact.md section 6): the barrier's
+    curvature at gap dhat/2 equals the bending stiffness of one node, kappa_min b''(dhat/2) = A1 / h^3
+    (energy / length^2, GAP mode), and kappa_max = KAPPA_RANGE kappa_min."""
+    rod = system.rod
+    h = float(np.mean(rod.l_bar))
+    k_min = float(np.max(rod.A1)) / h ** 3 / _B2_HALF
+    return k_min, KAPPA_RANGE * k_min
+
+
+def curvature_radius_check(rod, state, radius, where):
+    """ValueError if the rod's natural or start curvature radius is not larger than ``radius``: a rod bent
+    tighter than its own radius would overlap itself on the inside of the bend."""
+    kb = np.linalg.norm(np.asarray(rod.kappa_bar, float).reshape(rod.n_vertices, -1), axis=1)
+    if kb.size:
+        k0 = float((kb / rod.voronoi).max())
+        if k0 * radius >= 1.0:
+            v = int(np.argmax(kb / rod.voronoi))
+            raise ValueError(f"{where}: radius {radius:g} is not smaller than the rod's natural radius of curvature "
+                             f"{1 / k0:.6g} (at vertex {v}); a rod cannot bend tighter than its own radius")
+    if state is not None and rod.n_vertices:
+        from ..diagnostics import curvature
+
+        k = curvature(rod, state)
+        if float(k.max()) * radius >= 1.0:
+            v = int(np.argmax(k))
+            raise ValueError(f"{where}: the starting state bends to a radius of curvature {1 / k[v]:.6g} at vertex {v}, "
+                             f"not larger than the radius {radius:g}")
+
+
+@register
+@dataclass(frozen=True)
+class SelfContact:
+    """Self-contact of the scene's rod; build it with ``der.self_contact``."""
+
+    radius: float
+    dhat: float | None = None
+    kappa: float | None = None
+    constructor = "self_contact(radius)"
+
+    def check_scene(self, scene):
+        curvature_radius_check(scene.rod, None, self.radius, "der.self_contact")
+        h = float(scene.rod.l_bar.min())
+        if scene.rod.closed and scene.rod.n_edges <= 2 * math.ceil((math.pi * self.radius + self.dhat_value) / h) + 1:
+            raise ValueError(f"der.self_contact: the ring has {scene.rod.n_edges} edges, too few for its neighbour "
+                             f"exclusion (an arc pi r + dhat = {math.pi * self.radius + self.dhat_value:.4g} on each "
+                             f"side, edge length {h:.4g}); refine the ring or reduce the radius")
+
+    @property
+    def dhat_value(self):
+        return DHAT_FRACTION * self.radius if self.dhat is None else self.dhat
+
+    def bind(self, system):
+        return BoundSelfContact(self, system)
+
+
+def self_contact(radius, dhat=None, kappa=None):
+    """Self-contact of a rod of radius ``radius`` (length): non-neighbouring edges stay more than 2r apart
+    (centreline distance) and never pass through each other, also within a solver step.
+
+    Parameters
+    ----------
+    radius : float > 0
+        The rod's (hard-core) radius r. It must be smaller than the rod's radius of curvature.
+    dhat : float > 0, optional
+        The range of the contact barrier (a gap, length; default 0.1 r): contact forces act on pairs whose
+        surfaces are closer than dhat, and the equilibrium gap of a loaded contact lies in (0, dhat).
+    kappa : float > 0, optional
+        Barrier stiffness (energy / length^2). Default: adaptive (docs/contact.md section 6).
+
+    Neighbours along the rod within an arc pi r + dhat are not contact partners (a rod bent to a radius of
+    curvature near r would otherwise touch itself on the inside of the bend).
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 20), A1=1.0, A2=1.5)
+    >>> scene = der.Scene(rod, constraints=[der.clamp("start")], contacts=[der.self_contact(0.01)])
+    """
+    radius = positive_radius(radius, "der.self_contact: radius")
+    if dhat is not None:
+        dhat = positive_radius(dhat, "der.self_contact: dhat")
+    if kappa is not None:
+        kappa = validate.finite_number(kappa, "der.self_contact: kappa")
+        if not kappa > 0:
+            raise ValueError(f"der.self_contact: kappa must be > 0 (or None: adaptive); got {kappa!r}")
+    return SelfContact(radius, dhat, kappa)
+
+
+class BoundBarrier:
+    """What self-contact and obstacles share within one solve: the adaptive barrier stiffness."""
+
+    couples_dofs = False
+
+    def _init_stiffness(self, term_kappa, system):
+        self.kappa_min, self.kappa_max = stiffness_bounds(system, self.dhat)
+        self.adaptive = term_kappa is None
+        self.kappa = self.kappa_min if term_kappa is None else float(term_kappa)
+        self.prev_gap = np.inf
+        self.min_gap = np.inf
+        self.force_scale = 0.0
+        self.n_active = 0
+        self.kappa_updates = 0
+        # PSD-project the pair Hessians (IPC); the implicit solver switches to the exact Hessian in Newton's end
+        # game, where the projection would turn its quadratic convergence into a slow linear one
+        self.project = True
+
+    def positions(self, state):
+        return np.ascontiguousarray(state.q.reshape(-1, 4)[:self.n_nodes, :3])
+
+    def start_stiffness(self, state, system):
+        """IPC's initial stiffness: the least-squares balance of the elastic residual and the barrier gradient,
+        kappa = (R . g_B) / (g_B . g_B) over the free DOFs (g_B at kappa = 1), clamped to [kappa_min,
+        kappa_max]; kappa_min if no pair is active."""
+        if not self.adaptive:
+            return
+        from ..scene import evaluate
+
+        n = system.n_dof
+        grad, fext = np.zeros(n), np.zeros(n)
+        evaluate(system.plan, state.q, state.d1, state.reference_twist, state.lam, 1, grad, fext, system.ab,
+                 system.kl, system.ku, system.perm)
+        R = fext - grad
+        kappa, self.kappa = self.kappa, 1.0
+        gB = np.zeros(n)
+        self.evaluate(state, 1, gB, system.ab, [])
+        self.kappa = kappa
+        free = system.free
+        gg = float(gB[free] @ gB[free])
+        if gg > 0:
+            # the barrier pushes along -g_B; it balances the elastic residual R when -kappa g_B ~ R
+            self.kappa = min(max(-float(R[free] @ gB[free]) / gg, self.kappa_min), self.kappa_max)
+
+    def after_step(self, state):
+        """IPC's update: double kappa (up to kappa_max) while the smallest gap keeps falling below 1e-3 dhat.
+        Needs ``min_gap`` from the last evaluate. Returns True if kappa changed."""
+        changed = False
+        if self.adaptive and self.min_gap < 1e-3 * self.dhat and self.min_gap < self.prev_gap \
+                and self.kappa < self.kappa_max:
+            self.kappa = min(2.0 * self.kappa, self.kappa_max)
+            self.kappa_updates += 1
+            changed = True
+        self.prev_gap = self.min_gap
+        return changed
+
+
+class BoundSelfContact(BoundBarrier):
+    couples_dofs = True
+
+    def __init__(self, term, system):
+        from .. import contact as C
+        from ..contact import assembly
+
+        self.C, self.A = C, assembly
+        rod = system.rod
+        self.term = term
+        self.rod = rod
+        self.radius = term.radius
+        self.dhat = term.dhat_value
+        h_min = float(rod.l_bar.min())
+        topo = C.topology([(rod.n_edges, rod.closed, self.radius, h_min)], self.dhat)
+        # exclude an arc pi r + dhat (docs/contact.md section 4: a rod bent to radius ~r)
+        k = C.exclusion_k(h_min, self.radius, self.dhat, arc=np.pi * self.radius + self.dhat)
+        self.topo = topo._replace(rod_k=np.array([k], dtype=np.int64))
+        self.n_nodes = rod.n_nodes
+        self.n_dof = rod.n_dof
+        self.node_dof = 4 * np.arange(rod.n_nodes, dtype=np.int64)
+        self._init_stiffness(term.kappa, system)
+
+    def check_start(self, state):
+        curvature_radius_check(self.rod, state, self.radius, "der.self_contact")
+        pos = self.positions(state)
+        pairs = self.C.candidate_pairs(pos, self.topo, 0.0)
+        if pairs.shape[0]:
+            gap, force, pa, pb = self._pair_data(pos, pairs)
+            p = int(np.argmin(gap))
+            if gap[p] <= 0.0:
+                ea, eb = (int(e) for e in pairs[p])
+                raise ValueError(f"der.self_contact: the starting state violates the contact distance: edges {ea} and "
+                                 f"{eb} are {gap[p] + 2 * self.radius:.6g} apart (centrelines), not more than 2r = "
+                                 f"{2 * self.radius:.6g}")
+
+    def _pair_data(self, pos, pairs):
+        m = pairs.shape[0]
+        gap, force = np.empty(m), np.empty(m)
+        pa, pb = np.empty((m, 3)), np.empty((m, 3))
+        self.A.pair_forces(pos, self.topo.edges, pairs, self.topo.edge_radius, self.dhat, self.kappa, gap, force,
+                           pa, pb)
+        return gap, force, pa, pb
+
+    def evaluate(self, state, order, grad, ab, coo):
+        pos = self.positions(state)
+        topo = self.topo
+        pairs = self.C.candidate_pairs(pos, topo, self.dhat)
+        if order == 0:
+            return float(self.A.pairs_energy(pos, topo.edges, pairs, topo.edge_radius, self.dhat, self.kappa))
+        act = self.C.active_pairs(pos, topo.edges, pairs, topo.edge_radius, self.dhat)
+        self.n_active = act.shape[0]
+        if act.shape[0] == 0:
+            self.force_scale, self.min_gap = 0.0, np.inf
+            return 0.0
+        g = np.zeros(self.n_dof)
+        m = 144 * act.shape[0]
+        rows, cols, vals = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64), np.empty(m)
+        energy, n_active, nt, min_gap = self.C.assemble_pairs(
+            pos, topo.edges, act, topo.edge_radius, self.dhat, self.kappa, self.C.GAP, order >= 2 and self.project, self.node_dof,
+            g, rows, cols, vals)
+        self.min_gap = float(min_gap)
+        if not np.isfinite(energy):
+            return np.inf
+        grad += g
+        self.force_scale = float(np.linalg.norm(g.reshape(-1, 4)[:, :3], axis=1).max())
+        if order >= 2:
+            coo.append((rows[:nt], cols[:nt], vals[:nt]))
+        return float(energy)
+
+    def max_step(self, state, delta):
+        pos = self.positions(state)
+        dpos = np.ascontiguousarray(delta.reshape(-1, 4)[:self.n_nodes, :3])
+        try:
+            tau, _ = self.C.safe_step(pos, dpos, self.topo, self.dhat, MIN_GAP_FRACTION)
+        except ValueError:
+            return 0.0
+        return float(tau)
+
+    def diagnostics(self, state):
+        """Pairs in contact (gap < dhat), their gaps, forces (-kappa b'(gap), force units), forces per length
+        (over the pair's mean rest edge length), contact points, and the smallest centreline distance over all
+        non-neighbour pairs (brute force up to 4000 edges, else over pairs within 4r)."""
+        pos = self.positions(state)
+        topo = self.topo
+        pairs = self.C.candidate_pairs(pos, topo, self.dhat)
+        gap, force, pa, pb = self._pair_data(pos, pairs)
+        keep = gap < self.dhat
+        pairs, gap, force, pa, pb = pairs[keep], gap[keep], force[keep], pa[keep], pb[keep]
+        l_bar = self.rod.l_bar
+        per_length = force / (0.5 * (l_bar[pairs[:, 0]] + l_bar[pairs[:, 1]])) if pairs.size else force
+        if topo.edges.shape[0] <= 4000:
+            g_min, ea, eb = self.A.min_pair_gap(pos, topo.edges, topo.rod_of_edge, topo.local_edge, topo.rod_n_edges,
+                                                topo.rod_closed, topo.rod_k, topo.edge_radius)
+        else:
+            near = self.C.candidate_pairs(pos, topo, 4.0 * self.radius)
+            g, *_ = self._pair_data(pos, near) if near.size else (np.array([np.inf]),)
+            p = int(np.argmin(g))
+            g_min, ea, eb = (float(g[p]), *near[p]) if near.size else (np.inf, -1, -1)
+        return {
+            "kind": "self_contact", "radius": self.radius, "dhat": self.dhat, "kappa": self.kappa,
+            "n_contacts": int(pairs.shape[0]), "pairs": pairs.tolist(), "gap": gap.tolist(), "force": force.tolist(),
+            "force_per_length": per_length.tolist(), "total_force": float(force.sum()),
+            "points": (0.5 * (pa + pb)).tolist(), "normals": _unit(pa - pb).tolist(),
+            "min_distance": float(g_min + 2 * self.radius), "min_distance_edges": [int(ea), int(eb)],
+        }
+
+
+def _unit(v):
+    n = np.linalg.norm(v, axis=1, keepdims=True) if v.size else np.ones((0, 1))
+    return v / np.where(n > 0, n, 1.0)

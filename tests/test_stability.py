@@ -1,0 +1,191 @@
+"""Stability analysis (issue 11, items 10-12): symmetry modes constructed from the scene and projected out
+(never chosen by eigenvalue size), the banded shift-invert solver against the dense one, the eigenvalues'
+second-order convergence on the cantilever, and a scene with nothing free."""
+import numpy as np
+import pytest
+from scipy.special import jn_zeros
+
+import der
+from der.linalg import band_to_sparse
+from der.solvers.stability import lowest_modes, symmetry_modes
+from der.solvers.system import build_system, evaluate_system, prepare_state
+
+CANTILEVER = 1.8751040687119611 ** 4   # lowest bending eigenvalue, A1 / (rho_A L^4)
+
+
+def _system(scene, state=None):
+    system = build_system(scene, der.SolverOptions())
+    return system, prepare_state(system, scene.rod.rest_state() if state is None else state)
+
+
+def test_nothing_free_is_trivially_stable():
+    """An inextensible rod clamped at both ends with no interior node fixes every DOF: it used to raise
+    'zero-size array' in the stability analysis. (The issue's straight(1.0, 2) -- two end edges sharing their
+    middle node -- is now refused before any work: the clamps act on the end cross-sections, and supports at
+    both ends need end edges of their own.)"""
+    with pytest.raises(ValueError, match="supports at both ends need at least 3 edges"):
+        der.Scene(der.rod_from_shape(der.shapes.straight(1.0, 2), 1.0, 1.0),
+                  constraints=[der.clamp("start"), der.clamp("end")])
+    rod = der.rod_from_shape(der.shapes.straight(1.0, 3), 1.0, 1.0)
+    res = der.solve(der.Scene(rod, constraints=[der.clamp("start"), der.clamp("end"), der.fix_theta(1)]))
+    assert res.converged and res.stable is True and res.min_eigenvalue == np.inf
+    assert "every DOF is fixed" in res.stability_note and res.stability_time >= 0
+
+
+@pytest.mark.parametrize("n", [25, 50, 100])
+def test_upright_cable_on_a_pin_under_gravity_is_unstable(n):
+    """A stretch-stiff cable standing on a pin under its weight can only fall over: its lowest eigenvalues
+    (falling in two planes) are negative. The old stiffness threshold removed them as 'symmetry modes'. Only the
+    rotation about the vertical (the direction of the dead load) is a symmetry."""
+    rod = der.rod_from_shape(der.shapes.straight(1.0, n, axis=(0, 0, 1)), 1e-4, 1e-4, EA=1e7)
+    res = der.solve(der.Scene(rod, loads=[der.distributed_force([0, 0, -1.0])], constraints=[der.pin(0)]))
+    assert res.converged and res.stable is False and res.min_eigenvalue < -1.0
+    ev = np.sort(res.eigenvalues)
+    assert ev[0] == pytest.approx(ev[1], rel=1e-8)   # the two vertical planes
+    assert "1 symmetry mode(s) removed" in res.stability_note
+
+
+def test_hanging_chain_swing_modes_at_n100():
+    """A chain (A1 -> 0) hanging from a pin swings with omega^2 = g j0^2 / (4 l), j0 = 2.4048 the first zero
+    of J0 and l = L + h/2 its length from the pin (the pinned node lies half an edge beyond xi = 0). The old
+    threshold removed the swing modes at n >= 100; here they are the degenerate pair nearest 1.4458 g / l."""
+    n, g = 100, 1.0
+    rod = der.rod_from_shape(der.shapes.straight(1.0, n, axis=(0, 0, -1)), 1e-6, 1e-6, EA=1e4)
+    res = der.solve(der.Scene(rod, loads=[der.distributed_force([0, 0, -g])], constraints=[der.pin(0)]))
+    assert res.converged and res.stable
+    h = rod.l_bar[0]
+    swing = g * jn_zeros(0, 1)[0] ** 2 / (4 * (rod.length + h / 2))
+    ev = np.sort(res.eigenvalues)
+    near = ev[np.abs(ev - swing) < 1e-2 * swing]
+    assert near.size == 2 and np.abs(near - swing).max() < 2e-3 * swing
+
+
+def test_cantilever_lowest_eigenvalue_converges_at_second_order():
+    """Mass lumped on [0, L] (the outer nodes carry none): the error falls fourfold per halving of h; lumping
+    half an edge onto the node beyond the tip (the old mass) gave -2h/L, first order (12.35 at n = 2000)."""
+    errors = []
+    for n in (25, 50, 100):
+        rod = der.rod_from_shape(der.shapes.straight(1.0, n), 1.0, 1.0)
+        res = der.solve(der.Scene(rod, constraints=[der.clamp("start")]))
+        assert res.eigenvalues[0] == pytest.approx(res.eigenvalues[1], rel=1e-9)
+        errors.append(abs(res.min_eigenvalue - CANTILEVER) / CANTILEVER)
+    assert errors[0] < 2e-3
+    for a, b in zip(errors, errors[1:]):
+        assert 3.6 < a / b < 4.4
+
+
+@pytest.mark.parametrize("case", ["euler_above", "free_arc", "pinned_chain"])
+def test_banded_shift_invert_matches_dense(case):
+    """The banded shift-invert path (dgbtrf/dgbtrs inside ARPACK, symmetry modes projected by a Woodbury
+    update) gives the dense eigenvalues; every eigenpair's relative residual is small."""
+    n = 60
+    if case == "euler_above":
+        rod = der.rod_from_shape(der.shapes.straight(1.0, n), 1.0, 1.0)
+        scene = der.Scene(rod, loads=[der.end_force([0, 0, -1.1 * np.pi ** 2 / 4])], constraints=[der.clamp("start")])
+    elif case == "free_arc":
+        scene = der.Scene(der.rod_from_shape(der.shapes.arc(1.0, 2.0, n), 1.0, 0.7))
+    else:
+        rod = der.rod_from_shape(der.shapes.straight(1.0, n, axis=(0, 0, -1)), 1e-2, 1e-2, EA=1e3)
+        scene = der.Scene(rod, loads=[der.distributed_force([0, 0, -1.0])], constraints=[der.pin(0)])
+    res = der.solve(scene, stability=False)
+    system = build_system(scene, der.SolverOptions())
+    dense = lowest_modes(system, res.state, 6, dense_max=10 ** 9)
+    banded = lowest_modes(system, res.state, 6, dense_max=0)
+    assert dense["method"] == "dense" and banded["method"] == "banded shift-invert"
+    assert dense["n_symmetry"] == banded["n_symmetry"] == {"euler_above": 0, "free_arc": 6, "pinned_chain": 1}[case]
+    scale = np.abs(dense["eigenvalues"]).max()
+    assert np.abs(banded["eigenvalues"] - dense["eigenvalues"]).max() < 1e-7 * scale
+    assert banded["residuals"].max() < 1e-6 and dense["residuals"].max() < 1e-6
+
+
+def _rank(modes):
+    if not modes:
+        return 0
+    V = np.array(modes).T
+    V = V / np.linalg.norm(V, axis=0)
+    s = np.linalg.svd(V, compute_uv=False)
+    return int(np.sum(s > 1e-8 * s[0]))
+
+
+def _null_residual(scene, state):
+    system, work = _system(scene, state)
+    evaluate_system(system, work, 2)
+    K = band_to_sparse(system.ab, system.kl, system.ku, system.perm).toarray()
+    K[system.fixed] = 0.0
+    K[:, system.fixed] = 0.0
+    modes = symmetry_modes(system, work)
+    return [np.linalg.norm(K @ v) / (np.abs(K).max() * np.linalg.norm(v)) for v in modes], modes
+
+
+def test_symmetry_modes_follow_constraints_and_dead_loads():
+    """Which rigid motions are symmetries is decided by the constraints and the directions of the dead loads;
+    each constructed mode is annihilated by K at an equilibrium."""
+    # a free arc at rest: 3 translations + 3 rotations, all null vectors of K
+    arc = der.rod_from_shape(der.shapes.arc(1.0, 2.0, 20), 1.0, 0.7)
+    res, modes = _null_residual(der.Scene(arc), arc.rest_state())
+    assert _rank(modes) == 6 and max(res) < 1e-12
+    # a free naturally straight rod: its rotation about its own axis is the uniform spin (one mode, not two)
+    rod = der.rod_from_shape(der.shapes.straight(1.0, 20), 1.0, 1.0)
+    system, work = _system(der.Scene(rod))
+    assert lowest_modes(system, work)["n_symmetry"] == 6
+    # a chain hanging from a pin: only the rotation about the vertical through the pin
+    chain = der.rod_from_shape(der.shapes.straight(1.0, 20, axis=(0, 0, -1)), 1e-2, 1e-2, EA=1e3)
+    scene = der.Scene(chain, loads=[der.distributed_force([0, 0, -1.0])], constraints=[der.pin(0)])
+    eq = der.solve(scene, stability=False).state
+    res, modes = _null_residual(scene, eq)
+    assert _rank(modes) == 1 and max(res) < 1e-12
+    # the same with gravity along a skew direction and the chain hanging along it
+    g = np.array([1.0, 2.0, -2.0]) / 3.0
+    chain = der.rod_from_shape(der.shapes.straight(1.0, 20, axis=g, director=(1, 0, 0.5)), 1e-2, 1e-2, EA=1e3)
+    scene = der.Scene(chain, loads=[der.distributed_force(g)], constraints=[der.pin(0)])
+    eq = der.solve(scene, stability=False).state
+    res, modes = _null_residual(scene, eq)
+    assert _rank(modes) == 1 and max(res) < 1e-12
+    # dead forces along x on a rod along z leave only the rotation about x (and translations, spin); two
+    # directions break every rotation; a clamp breaks every rigid motion
+    rod = der.rod_from_shape(der.shapes.straight(1.0, 20), 1.0, 1.0)
+    system, work = _system(der.Scene(rod, loads=[der.end_force([1.0, 0, 0]), der.end_force([-1.0, 0, 0], "start")]))
+    assert _rank(symmetry_modes(system, work)) == 3 + 1 + 1
+    system, work = _system(der.Scene(rod, loads=[der.end_force([1.0, 0, 0]), der.end_force([0, -1.0, 0], "start")]))
+    assert _rank(symmetry_modes(system, work)) == 3 + 0 + 1
+    system, work = _system(der.Scene(rod, constraints=[der.clamp("start")]))
+    assert symmetry_modes(system, work) == []
+
+
+def test_ring_sliding_mode_exists_exactly_when_the_ring_is_uniform():
+    """Material sliding is a symmetry of a uniform ring with no load or constraint breaking it; a pin breaks
+    it, and so does a weld that turns the natural curvature (an imposed twist not a whole number of turns on
+    a naturally curved ring). On the planar circle it is the rotation about the axis plus a uniform spin."""
+    from der.solvers.stability import sliding_mode
+
+    ring = der.rod_from_shape(der.shapes.ring(1.0, 30), 1.0, 1.0)
+    straight_ring = ring.with_natural(kappa_bar=0.0).with_imposed_twist(1.0)
+
+    def n_modes(rod, **kw):
+        system, work = _system(der.Scene(rod, **kw), der.solve(der.Scene(rod, **kw), stability=False).state)
+        return _rank(symmetry_modes(system, work))
+
+    assert n_modes(straight_ring) == 6 + 1                        # rigid, spin; sliding = rotation + spin here
+    assert n_modes(straight_ring, constraints=[der.pin(0)]) == 3 + 1   # rotations about the pin, spin
+    x = ring.rest_q.reshape(-1, 4)[:, :3]
+    pull = [der.point_force(3, 1e-3 * x[3]), der.point_force(18, 1e-3 * x[18])]   # opposite nodes, outwards
+    assert n_modes(straight_ring, loads=pull) == 3 + 1 + 1     # translations, rotation about the pull, spin
+    assert n_modes(ring.with_imposed_twist(1.5 * np.pi)) == 6          # welded natural curvature: no sliding
+    assert n_modes(ring.with_imposed_twist(2 * np.pi)) == 6 + 1        # a whole turn: sliding again
+    # on the circle the sliding mode lies in the span of the rigid rotation and the spin
+    system, work = _system(der.Scene(straight_ring), der.solve(der.Scene(straight_ring), stability=False).state)
+    res = lowest_modes(system, work)
+    assert res["n_symmetry"] == 7
+    v = sliding_mode(straight_ring, work)
+    assert np.abs(v.reshape(-1, 4)[:, 3] - v[3]).max() < 1e-12       # uniform twist rate: a uniform spin
+
+
+def test_stability_time_is_reported_apart_from_wall_time():
+    rod = der.rod_from_shape(der.shapes.straight(1.0, 40), 1.0, 1.0)
+    res = der.solve(der.Scene(rod, loads=[der.end_force([0.1, 0, 0])], constraints=[der.clamp("start")]))
+    assert res.stability_time > 0 and res.stable
+    off = der.solve(der.Scene(rod, loads=[der.end_force([0.1, 0, 0])], constraints=[der.clamp("start")]),
+                    stability=False)
+    assert off.stability_time == 0.0 and off.stable is None
+    chk = der.check_stability(der.Scene(rod, constraints=[der.clamp("start")]), rod.rest_state())
+    assert chk.stability_time > 0 and chk.min_eigenvalue == pytest.approx(CANTILEVER, rel=2e-3)

@@ -1,0 +1,73 @@
+"""Cost and accuracy of the stability analysis at large n: a straight cantilever (clamped at xi = 0, A1 = 1,
+rho_A = 1, L = 1) under a small transverse tip load 1e-4 A1/L^2 (so that the solve does real Newton work; it
+moves the eigenvalue by O(1e-8)); the lowest eigenvalue of the pencil (K, M) is compared with the Euler-Bernoulli value (1.8751041)^4 A1/(rho_A L^4)
+= 12.362363.
+
+    python tools/stability_scaling.py [--n 1000 10000 100000] [--threads 1] [--json]
+
+``--threads`` sets OPENBLAS_NUM_THREADS/OMP_NUM_THREADS before numpy loads (default 1: on a shared, loaded
+machine threaded BLAS inside ARPACK's Lanczos steps costs ten times more than it saves; 0 leaves them alone).
+
+Per n: solve time (wall_time), stability time (stability_time, not in wall_time) and their ratio, the lowest
+eigenvalue, its relative error, its relative eigen-residual ||K v - lambda M v|| / (|lambda| ||M v||) and its
+round-off floor eps |v|^T |K| |v| / v^T M v (the error rounding the assembled stiffness can cause: it grows
+like eps n^4, the stiffness entries being of order A1/h^3 while K v is of order lambda h).
+"""
+import argparse
+import json
+import os
+import sys
+
+if __name__ == "__main__":
+    _t = "1"
+    for i, a in enumerate(sys.argv):
+        if a == "--threads" and i + 1 < len(sys.argv):
+            _t = sys.argv[i + 1]
+    if _t != "0":
+        os.environ["OPENBLAS_NUM_THREADS"] = os.environ["OMP_NUM_THREADS"] = _t
+
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+
+import der  # noqa: E402
+from der.solvers.stability import lowest_modes  # noqa: E402
+from der.solvers.system import build_system  # noqa: E402
+
+EXACT = 1.8751040687119611 ** 4
+P = 1e-4   # a small transverse tip load (A1/L^2): a real solve; it moves the eigenvalue by O(P^2) only
+
+
+def row(n):
+    rod = der.rod_from_shape(der.shapes.straight(1.0, n, axis=(0, 0, 1), director=(1, 0, 0)), 1.0, 1.0)
+    scene = der.Scene(rod, loads=[der.end_force([P, 0, 0])], constraints=[der.clamp("start")])
+    res = der.solve(scene, progress=False)
+    out = lowest_modes(build_system(scene, der.SolverOptions()), res.state, 6)
+    lam = float(res.min_eigenvalue)
+    return {"n": n, "solve_s": res.wall_time, "iterations": res.iterations, "stability_s": res.stability_time,
+            "ratio": res.stability_time / res.wall_time, "lowest": lam, "exact": EXACT,
+            "rel_error": (lam - EXACT) / EXACT, "rel_residual": float(out["residuals"][0]),
+            "floor": float(out["floors"][0]), "method": out["method"], "note": res.stability_note}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, nargs="+", default=[1000, 10000, 100000])
+    ap.add_argument("--threads", type=int, default=1, help="BLAS threads (0: leave the environment alone)")
+    ap.add_argument("--json", action="store_true")
+    a = ap.parse_args(argv)
+    row(20)   # compile
+    rows = [row(n) for n in a.n]
+    if a.json:
+        print(json.dumps(rows, indent=1))
+        return 0
+    print(f"{'n':>7} {'solve s':>8} {'stab s':>8} {'ratio':>6} {'lowest':>12} {'rel err':>10} {'residual':>9} "
+          f"{'floor':>9}")
+    for r in rows:
+        print(f"{r['n']:>7} {r['solve_s']:8.3f} {r['stability_s']:8.3f} {r['ratio']:6.2f} {r['lowest']:12.6f} "
+              f"{r['rel_error']:10.2e} {r['rel_residual']:9.1e} {r['floor']:9.1e}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -383,18 +383,21 @@ class _Problem:
         """Factorise the constrained force Jacobian at ``state``; returns (lu, piv, system, gauge basis)."""
         from scipy.linalg.lapack import dgbtrf
 
-        from .linalg import add_diagonal, constrain_band
-        from .solvers.system import evaluate_system
+        from .linalg import add_diagonal
+        from .solvers.system import constrain_system, evaluate_system
 
         sys_ = self.system(p)
         evaluate_system(sys_, state, 2)
+        if getattr(sys_, "contact_coo", None):
+            raise ValueError("der.continuation: contact is active at this point (off-band stiffness); the bordered "
+                             "banded Newton of the continuation does not handle contact yet")
         V = gauge_modes(sys_, state)
         ab = sys_.ab.copy(order="F")
         if V.shape[1]:
             diag = np.abs(ab[sys_.kl + sys_.ku, :][sys_.perm])
             diag[diag == 0] = 1.0
             add_diagonal(ab, sys_.kl, sys_.ku, sys_.perm, diag, GAUGE_REGULARISATION)
-        constrain_band(ab, sys_.kl, sys_.ku, sys_.perm, sys_.fixed, 1.0)
+        constrain_system(sys_, ab, 1.0)        # T^T K T on the end supports' free variables, held DOFs identity
         lu, piv, info = dgbtrf(ab, sys_.kl, sys_.ku, overwrite_ab=1)
         return (lu, piv, sys_, V) if info == 0 else None
 
@@ -407,6 +410,13 @@ class _Problem:
         b[sys_.perm] = rhs
         x, info = dgbtrs(lu, sys_.kl, sys_.ku, b.reshape(len(b), -1), piv)
         x = x.reshape(b.shape)[sys_.perm]
+        if x.ndim == 1:
+            _expand(sys_, x)
+        else:
+            for k in range(x.shape[1]):
+                col = np.ascontiguousarray(x[:, k])
+                _expand(sys_, col)
+                x[:, k] = col
         if V.shape[1]:
             x = x - V @ (V.T @ x)
         return x
@@ -478,6 +488,15 @@ class _Problem:
             state.lam[:] = trial.lam
             p = p_new
         return None
+
+
+def _expand(system, x):
+    """x <- T x: a step in the end supports' free variables as a step of q (in place; nothing without them)."""
+    try:
+        from .solvers.system import expand
+    except ImportError:        # a der without end supports
+        return x
+    return expand(system, x)
 
 
 def gauge_modes(system, state):

@@ -29,6 +29,15 @@ def new_band(n_dof, kl, ku):
 
 
 @njit(cache=True)
+def zero_band(ab):
+    """ab <- 0, column by column (contiguous in Fortran order; ``ab[:, :] = 0`` in numba walks it row by row,
+    one cache line per entry once the band outgrows the cache)."""
+    for j in range(ab.shape[1]):
+        for i in range(ab.shape[0]):
+            ab[i, j] = 0.0
+
+
+@njit(cache=True)
 def constrain_band(ab, kl, ku, perm, fixed, diag):
     """Replace rows and columns of fixed DOFs by identity (times ``diag``), keeping the band."""
     n = ab.shape[1]

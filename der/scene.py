@@ -15,7 +15,9 @@ from . import validate
 from .energies.bend import bend_energy, bend_gradient, bend_hessian
 from .energies.stretch import stretch_energy, stretch_gradient, stretch_hessian
 from .energies.twist import twist_energy, twist_gradient, twist_hessian
+from .energies.vertex import bend_twist_hessian
 from .geometry import add_transport_jacobian, edge_frames
+from .linalg import zero_band
 from .loads import (
     DistributedForce, EndForce, EndTorque, PointForce, TwistingMoment, add_dead_torques, add_nodal_forces,
     add_theta_moments,
@@ -172,7 +174,7 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
     grad[:] = 0.0
     fext[:] = 0.0
     if order >= 2:
-        ab[:, :] = 0.0
+        zero_band(ab)
     energy = 0.0
     if plan.has_stretch:
         plan.counters[0] += 1
@@ -186,7 +188,17 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
         ed = edge_frames(q, plan.edge_nodes, d1)   # one pass over edges, shared by bending and twisting
     else:
         ed = np.empty((0, 10))
-    if plan.has_bend:
+    fused = order >= 2 and plan.has_bend and plan.has_twist
+    if fused:
+        # one pass over the vertex stencils for both terms: half the scattering into the band (issue 17)
+        plan.counters[1] += 1
+        plan.counters[2] += 1
+        e_bend, e_twist = bend_twist_hessian(q, ed, plan.vertex_nodes, plan.vertex_edges, reference_twist, plan.weld,
+                                             plan.kappa_bar, plan.twist_bar, plan.voronoi, plan.A1, plan.A2, grad,
+                                             ab, kl, ku, perm)
+        energy += e_bend
+        energy += e_twist
+    if plan.has_bend and not fused:
         plan.counters[1] += 1
         if order >= 2:
             energy += bend_hessian(ed, plan.vertex_nodes, plan.vertex_edges, plan.weld, plan.kappa_bar,
@@ -196,7 +208,7 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
                                     plan.voronoi, plan.A1, grad)
         else:
             energy += bend_energy(ed, plan.vertex_edges, plan.weld, plan.kappa_bar, plan.voronoi, plan.A1)
-    if plan.has_twist:
+    if plan.has_twist and not fused:
         plan.counters[2] += 1
         if order >= 2:
             energy += twist_hessian(q, ed, plan.vertex_nodes, plan.vertex_edges, reference_twist, plan.weld,

@@ -39,3 +39,50 @@ def test_rod_from_shape_equals_per_vertex_reference(name):
 def test_straight_director_parallel_to_an_edge_is_refused():
     with pytest.raises(ValueError, match="director is parallel to edge"):
         der.rod_from_shape(der.shapes.Shape(np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0.0]]), director=(1, 0, 0)), 1, 1)
+
+
+def test_max_row_norm_equals_row_norms():
+    from der.solvers.system import max_row_norm, row_norms
+
+    rng = np.random.default_rng(1)
+    for a in (rng.standard_normal((50, 3)), 1e200 * rng.standard_normal((7, 3)), np.zeros((4, 3)),
+              1e-300 * rng.standard_normal((5, 3))):
+        assert max_row_norm(a) == row_norms(a).max()
+    a = rng.standard_normal((5, 3))
+    a[2, 1] = np.nan
+    assert np.isnan(max_row_norm(a))
+    a[2, 1] = np.inf
+    assert max_row_norm(a) == np.inf
+
+
+def test_fused_bend_twist_assembly_equals_separate_terms():
+    """The fused vertex pass (bend + twist in one scatter) gives the matrix of bend_hessian + twist_hessian to
+    round-off, on an open rod and on a (folded) ring with a weld."""
+    from der.energies.bend import bend_hessian
+    from der.energies.twist import twist_hessian
+    from der.energies.vertex import bend_twist_hessian
+    from der.geometry import edge_frames
+    from der.linalg import band_layout, new_band
+    from der.scene import make_plan
+
+    rng = np.random.default_rng(2)
+    for rod in (der.rod_from_shape(der.shapes.helix(1.0, 0.6, 2, 40), 1.0, 1.5),
+                der.rod_from_shape(der.shapes.ring(1.0, 30), 1.0, 1.5).with_imposed_twist(0.7)):
+        state = rod.rest_state()
+        q = state.q + 1e-2 * rng.standard_normal(rod.n_dof)
+        plan = make_plan(der.Scene(rod), np.ones(rod.n_edges))
+        kl, ku, perm = band_layout(rod.n_nodes, rod.closed)
+        ed = edge_frames(q, rod.edge_nodes, state.d1)
+        g1, ab1 = np.zeros(rod.n_dof), new_band(rod.n_dof, kl, ku)
+        eb = bend_hessian(ed, plan.vertex_nodes, plan.vertex_edges, plan.weld, plan.kappa_bar, plan.voronoi,
+                          plan.A1, g1, ab1, kl, ku, perm)
+        et = twist_hessian(q, ed, plan.vertex_nodes, plan.vertex_edges, state.reference_twist, plan.weld,
+                           plan.twist_bar, plan.voronoi, plan.A2, g1, ab1, kl, ku, perm)
+        g2, ab2 = np.zeros(rod.n_dof), new_band(rod.n_dof, kl, ku)
+        eb2, et2 = bend_twist_hessian(q, ed, plan.vertex_nodes, plan.vertex_edges, state.reference_twist, plan.weld,
+                                      plan.kappa_bar, plan.twist_bar, plan.voronoi, plan.A1, plan.A2, g2, ab2, kl, ku,
+                                      perm)
+        assert eb2 == eb and et2 == et
+        assert np.abs(g2 - g1).max() <= 1e-13 * np.abs(g1).max()
+        assert np.abs(ab2 - ab1).max() <= 1e-13 * np.abs(ab1).max()
+        assert np.abs(ab1).max() > 0

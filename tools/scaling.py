@@ -30,7 +30,43 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
 
 
-def single(problem, n):
+TOL = 1e-8
+
+
+def dgbsv_seconds(scene, state, repeat=3):
+    """Seconds of one LAPACK banded factor-and-solve (``dgbsv``) of the Newton matrix of ``scene`` at ``state``
+    -- what one Newton iteration cannot go below -- measured here, beside der's iteration (best of ``repeat``;
+    the copy of the band that dgbsv overwrites is timed apart and not counted). Also returns the round-off
+    floor of the residual at ``state`` (``residual_floor``: eps |K| |q| against the force scale)."""
+    import der
+    from der.linalg import add_diagonal, band_solve, constrain_band
+    from der.solvers.system import (
+        build_system, evaluate_system, load_scales, prepare_state, residual_floor, residual_vector,
+    )
+
+    system = build_system(scene, der.SolverOptions())
+    st = prepare_state(system, state)
+    evaluate_system(system, st, 2)
+    floor = residual_floor(system, st, load_scales(system, st))
+    kl, ku, perm = system.kl, system.ku, system.perm
+    ab = system.ab
+    diag = np.abs(ab[kl + ku, :][perm])
+    diag[diag == 0] = 1.0
+    add_diagonal(ab, kl, ku, perm, diag, 1e-3)
+    constrain_band(ab, kl, ku, perm, system.fixed, 1.0)
+    work = np.empty_like(ab)
+    R = residual_vector(system)
+    best = np.inf
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        work[:] = ab
+        t1 = time.perf_counter()
+        band_solve(work, kl, ku, perm, R)
+        best = min(best, time.perf_counter() - t1)
+    return best, floor
+
+
+def single(problem, n, time_budget=120.0, trace=True):
     """One run in this process; returns a dict (called in a child process)."""
     import tracemalloc
 
@@ -42,8 +78,20 @@ def single(problem, n):
     scene, state, error = _problem(problem, n)
     setup_s = time.perf_counter() - t0
     res = der.solve(scene, state=state, stability=False, raise_on_failure=False,
-                    options=der.SolverOptions(time_budget=120.0))
+                    options=der.SolverOptions(time_budget=time_budget, tol=TOL))
     peak_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    s_per_iteration = res.wall_time / max(res.iterations, 1)
+    t_dgbsv, floor = dgbsv_seconds(scene, res.state)
+    out = {"problem": problem, "n": n, "converged": res.converged, "status": res.status, "tol": TOL,
+           "iterations": res.iterations, "solve_s": res.wall_time, "setup_s": setup_s,
+           "s_per_iteration": s_per_iteration, "dgbsv_s": t_dgbsv,
+           "per_iteration_ratio_to_dgbsv": s_per_iteration / t_dgbsv, "residual": res.residual,
+           "residual_floor": floor, "message": res.message, "error": error(res.state),
+           "rss_growth_mb": (peak_rss - base_rss) / 1024.0, "peak_rss_mb": peak_rss / 1024.0,
+           "rss_per_edge_kb": (peak_rss - base_rss) / n, "compile_s": compile_s,
+           **{f"{k}_s": v for k, v in res.timings.items()}}
+    if not trace:
+        return out
     # NumPy's share of the peak, in a second, short solve: tracemalloc slows allocation-heavy code, so it is
     # kept out of the timed run (the work arrays are all allocated in the first iterations)
     tracemalloc.start()
@@ -51,11 +99,8 @@ def single(problem, n):
               options=der.SolverOptions(max_iterations=3))
     _, traced_peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
-    return {"problem": problem, "n": n, "converged": res.converged, "status": res.status,
-            "iterations": res.iterations, "solve_s": res.wall_time, "setup_s": setup_s,
-            "s_per_iteration": res.wall_time / max(res.iterations, 1), "residual": res.residual,
-            "message": res.message, "error": error(res.state), "rss_growth_mb": (peak_rss - base_rss) / 1024.0,
-            "traced_peak_mb": traced_peak / 2 ** 20, "compile_s": compile_s}
+    out["traced_peak_mb"] = traced_peak / 2 ** 20
+    return out
 
 
 def _problem(problem, n):
@@ -104,11 +149,16 @@ def main(argv=None):
     ap.add_argument("--problems", nargs="+", default=["ring_torsion", "helix_winding"])
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--png", default=None)
+    ap.add_argument("--million", action="store_true",
+                    help="only the 10^6-edge helix between clamps: solve time, peak RSS and the split of the time")
     ap.add_argument("--single", nargs=2, metavar=("PROBLEM", "N"), help=argparse.SUPPRESS)
+    ap.add_argument("--no-trace", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.single:
-        print(json.dumps(single(args.single[0], int(args.single[1]))))
+        print(json.dumps(single(args.single[0], int(args.single[1]), trace=not args.no_trace)))
         return
+    if args.million:
+        return million(args)
     rows = []
     for problem in args.problems:
         for n in args.n:
@@ -123,28 +173,59 @@ def main(argv=None):
             print(f"[scaling] {problem} n={n}: {r.get('status')} {r.get('solve_s', float('nan')):.3f} s",
                   file=sys.stderr)
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores (one used)")
-    print(f"{'problem':<14} {'n':>7} {'iter':>5} {'solve s':>9} {'s/iter':>9} {'residual':>9} {'error':>9} "
-          f"{'RSS MB':>8} {'numpy MB':>9}  status")
+    print(f"{'problem':<14} {'n':>7} {'iter':>5} {'solve s':>9} {'s/iter':>9} {'/dgbsv':>7} {'residual':>9} "
+          f"{'floor':>8} {'error':>9} {'setup s':>8} {'RSS MB':>8} {'numpy MB':>9}  status")
     for r in rows:
         if "solve_s" not in r:
             print(f"{r['problem']:<14} {r['n']:>7}  {r['status']}: {r['message']}")
             continue
         print(f"{r['problem']:<14} {r['n']:>7} {r['iterations']:>5} {r['solve_s']:>9.3f} {r['s_per_iteration']:>9.4f} "
-              f"{r['residual']:>9.1e} {r['error']:>9.1e} {r['rss_growth_mb']:>8.1f} {r['traced_peak_mb']:>9.1f}  "
+              f"{r['per_iteration_ratio_to_dgbsv']:>7.2f} {r['residual']:>9.1e} {r['residual_floor']:>8.1e} "
+              f"{r['error']:>9.1e} {r['setup_s']:>8.3f} {r['rss_growth_mb']:>8.1f} {r['traced_peak_mb']:>9.1f}  "
               f"{r['status']}")
     fits = {}
     for problem in args.problems:
         pr = [r for r in rows if r["problem"] == problem and "solve_s" in r]
         fits[problem] = {"time_per_iteration_exponent": fit(pr, "s_per_iteration"),
                          "solve_time_exponent": fit(pr, "solve_s"),
-                         "memory_exponent": fit(pr, "traced_peak_mb")}
-        print(f"{problem}: time/iteration ~ n^{fits[problem]['time_per_iteration_exponent']:.2f}, "
-              f"solve time ~ n^{fits[problem]['solve_time_exponent']:.2f}, "
-              f"memory ~ n^{fits[problem]['memory_exponent']:.2f}  (fits over n >= 1000)")
+                         "memory_exponent": fit(pr, "traced_peak_mb"),
+                         "setup_exponent": fit(pr, "setup_s"),
+                         "dgbsv_exponent": fit(pr, "dgbsv_s"),
+                         "floor_exponent": fit(pr, "residual_floor")}
+        f = {k: ("n/a" if v is None else f"{v:.2f}") for k, v in fits[problem].items()}
+        print(f"{problem}: time/iteration ~ n^{f['time_per_iteration_exponent']}, "
+              f"solve time ~ n^{f['solve_time_exponent']}, memory ~ n^{f['memory_exponent']}, "
+              f"setup ~ n^{f['setup_exponent']}, dgbsv ~ n^{f['dgbsv_exponent']}, "
+              f"floor ~ n^{f['floor_exponent']}  (fits over converged n >= 1000)")
     if args.png:
         _plot(rows, args.png)
     if args.json:
         print(json.dumps({"machine": platform.machine(), "rows": rows, "fits": fits}))
+
+
+def million(args):
+    """The 10^6-edge helix (stretched and overwound between clamps) in a fresh process."""
+    out = subprocess.run([sys.executable, __file__, "--single", "helix_winding", "1000000", "--no-trace"],
+                         capture_output=True, text=True)
+    try:
+        r = json.loads(out.stdout.strip().splitlines()[-1])
+    except (ValueError, IndexError):
+        r = {"problem": "helix_winding", "n": 1000000, "converged": False, "status": "crashed",
+             "message": out.stderr.strip()[-300:]}
+    if "solve_s" in r:
+        other = r["solve_s"] - r.get("assembly_s", 0.0) - r.get("factorisation_s", 0.0) - r.get("line_search_s", 0.0)
+        r["other_s"] = other
+        print(f"helix_winding n = 10^6: {r['status']} in {r['iterations']} iterations, residual {r['residual']:.2e} "
+              f"(tol {r['tol']:.0e}, floor {r['residual_floor']:.1e}), error {r['error']:.2e}")
+        print(f"  setup {r['setup_s']:.2f} s; solve {r['solve_s']:.2f} s = assembly {r['assembly_s']:.2f} + "
+              f"factorisation {r['factorisation_s']:.2f} + line search {r['line_search_s']:.2f} + other {other:.2f}; "
+              f"one dgbsv {r['dgbsv_s']:.3f} s, per iteration {r['per_iteration_ratio_to_dgbsv']:.2f} x dgbsv")
+        print(f"  peak RSS {r['peak_rss_mb']:.0f} MB (growth over the compiled process {r['rss_growth_mb']:.0f} MB, "
+              f"{r['rss_per_edge_kb']:.2f} kB per edge)")
+    else:
+        print(f"helix_winding n = 10^6: {r['status']}: {r['message']}")
+    if args.json:
+        print(json.dumps(r))
 
 
 def _plot(rows, path):

@@ -61,6 +61,7 @@ def solve_implicit(system, state, options, progress=None, recorder=None):
     state.copy_from(start)
     second = _relax(system, state, options, options.dt0, progress, recorder, first.iterations, t_start)
     second.history = first.history + second.history
+    second.timings = {k: first.timings.get(k, 0.0) + v for k, v in second.timings.items()}
     second.message += (f" (after Newton's method from the start stalled at residual {first.residual:.2e} in "
                        f"{first.iterations} iterations and the solve restarted with dt0)")
     return second
@@ -84,15 +85,16 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     just_updated = False
     descent = total_descent = noise = 0.0
     potential = potential_best = 0.0     # E - work of the loads, from the start of this loop
-    ab_K = np.empty_like(system.ab)
-    work = np.empty_like(system.ab)
+    timings = {"assembly": 0.0, "factorisation": 0.0, "line_search": 0.0}
     try:
         while True:
+            t_phase = time.perf_counter()
             energy = evaluate_system(system, state, 2)
             R = residual_vector(system)
             scales = load_scales(system, state)
             residual = residual_norm(system, R, scales)
             strain = max_strain(system, state) if rod.inextensible else 0.0
+            timings["assembly"] += time.perf_counter() - t_phase
             if not (np.isfinite(energy) and np.isfinite(residual) and np.isfinite(scales).all()):
                 # (an infinite force scale would make every residual 0: never a verdict)
                 state.copy_from(last_good)
@@ -141,25 +143,33 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 status, message = "time_budget", f"time budget of {options.time_budget:g} s used up"
                 break
             it += 1
-            ab_K[:] = system.ab
-            diag = np.abs(ab_K[kl + ku, :][perm])
+            diag = np.abs(system.ab[kl + ku, :][perm])
             diag[diag == 0] = 1.0
             fext = system.fext.copy()
             round_off = floor_forces(system, state)
             accepted = False
             for _attempt in range(MAX_SHRINKS):
+                if _attempt > 0:
+                    # the LU factors overwrote the Jacobian: assemble it again (cheaper than a copy of the band
+                    # at every step, as most steps take the first attempt; issue 17)
+                    t_phase = time.perf_counter()
+                    evaluate_system(system, state, 2)
+                    timings["assembly"] += time.perf_counter() - t_phase
                 if _attempt == 12 and residual < 100.0 * residual_floor(system, state, scales):
                     break   # near the round-off floor a step that lowers the energy may not exist
-                work[:] = ab_K
+                t_phase = time.perf_counter()
+                work = system.ab
                 add_diagonal(work, kl, ku, perm, diag, 1.0 / dt)
                 constrain_band(work, kl, ku, perm, system.fixed, 1.0)
                 delta, info = band_solve(work, kl, ku, perm, R)
+                timings["factorisation"] += time.perf_counter() - t_phase
                 with np.errstate(over="ignore", invalid="ignore"):   # a huge step is refused just below
                     slope = float(R @ delta)
                 if info != 0 or not np.all(np.isfinite(delta)) or slope <= 0:
                     dt = shrink(dt, options)
                     continue
                 a = 1.0
+                t_phase = time.perf_counter()
                 for _ls in range(options.line_search_steps):
                     if transport(system, state, state.q + a * delta, trial):
                         e_trial = evaluate_system(system, trial, 0)
@@ -169,11 +179,12 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                             accepted = True
                             break
                     a *= 0.5
+                timings["line_search"] += time.perf_counter() - t_phase
                 if accepted:
                     break
                 dt = shrink(dt, options)
             if not accepted:
-                evaluate_system(system, state, 2)
+                evaluate_system(system, state, 2)   # the Jacobian at ``state`` again (the factors replaced it)
                 status, floor, message = floor_verdict(
                     system, state, scales, residual, options.tol,
                     "no pseudo-time step lowers the energy (round-off, or a singular linearised system)")
@@ -203,4 +214,4 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                                         "finite state kept")
     return final_result(system, state, status, residual=float(residual), iterations=it,
                         wall_time=time.perf_counter() - t_start, message=message, solver="implicit", strain=strain,
-                        history=history, dt=dt, residual_floor=float(floor))
+                        history=history, dt=dt, residual_floor=float(floor), timings=timings)

@@ -176,6 +176,8 @@ class SolveResult:
     compile_time : seconds spent compiling (or loading from numba's cache) der's kernels before this solve,
         on the first solve of a process; never part of ``wall_time``. 0 afterwards.
     tol : the residual tolerance the solve was asked for.
+    timings : seconds of ``wall_time`` by phase where the solver measures them (implicit: "assembly" -- forces,
+        band Jacobian, residual and its scales --, "factorisation" -- banded LU and solve --, "line_search").
 
     ``print(result)`` shows a short summary (``repr``); the arrays are attributes (``result.state``,
     ``result.eigenvalues``, ``result.history``).
@@ -217,6 +219,7 @@ class SolveResult:
     residual_per_length: float = float("nan")
     compile_time: float = 0.0
     tol: float = float("nan")
+    timings: dict = field(default_factory=dict)
 
     def __repr__(self):
         """One short paragraph: status, residual against tol, iterations, times, stability, message."""

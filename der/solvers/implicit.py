@@ -24,7 +24,7 @@ import time
 
 import numpy as np
 
-from ..linalg import add_diagonal, band_solve, constrain_band
+from ..linalg import add_diagonal, band_solve, constrain_band, dot
 from .system import (
     FLOOR_FACTOR, INTERRUPTS, constraint_residual, energy_terms, evaluate_system, final_result, floor_forces,
     floor_verdict, is_interrupt, load_scales, max_strain, multiplier_update, residual_floor, residual_norm,
@@ -164,7 +164,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 delta, info = band_solve(work, kl, ku, perm, R)
                 timings["factorisation"] += time.perf_counter() - t_phase
                 with np.errstate(over="ignore", invalid="ignore"):   # a huge step is refused just below
-                    slope = float(R @ delta)
+                    slope = dot(R, delta)
                 if info != 0 or not np.all(np.isfinite(delta)) or slope <= 0:
                     dt = shrink(dt, options)
                     continue
@@ -173,7 +173,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 for _ls in range(options.line_search_steps):
                     if transport(system, state, state.q + a * delta, trial):
                         e_trial = evaluate_system(system, trial, 0)
-                        merit = e_trial - energy - a * float(fext @ delta)
+                        merit = e_trial - energy - a * dot(fext, delta)
                         slack = 1e-13 * (abs(energy) + abs(e_trial)) + 1e-300
                         if np.isfinite(e_trial) and merit <= -options.armijo * a * slope + slack:
                             accepted = True
@@ -194,10 +194,10 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
             # the progress measure uses the step actually taken (q + a delta rounded), not a delta: at the floor a
             # step can round back and forth between two states and credit the load work a fext.delta each time
             step = trial.q - state.q
-            change = e_trial - energy - float(fext @ step)
+            change = e_trial - energy - dot(fext, step)
             potential += change
             descent = max(-change, 0.0)
-            noise = float(round_off @ np.abs(step))
+            noise = dot(round_off, np.abs(step))
             state.copy_from(trial)
             total_descent += descent
             # trust the pseudo-time step more after a full step, less after a backtrack

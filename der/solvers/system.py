@@ -25,7 +25,7 @@ from ..constraints import apply_targets, fixed_dofs
 from ..diagnostics import _edge_forces
 from ..energies.stretch import elongations
 from ..geometry import edge_frames, transport_frames
-from ..linalg import band_layout, band_matvec, new_band
+from ..linalg import band_layout, band_matvec, dot, new_band
 from ..loads import DistributedForce, EndForce, EndTorque, PointForce, TwistingMoment
 from ..scene import COUNTER_NAMES, evaluate, make_plan
 
@@ -349,8 +349,8 @@ def multiplier_update(system, state, previous=None):
     g = elongations(state.q, rod.edge_nodes, rod.l_bar)
     k = system.plan.k_stretch
     if previous is not None:
-        gg = float(previous @ previous)
-        ratio = float(g @ previous) / gg if gg > 0 else 0.0
+        gg = dot(previous, previous)
+        ratio = dot(g, previous) / gg if gg > 0 else 0.0
         if ratio > 0.25 and k.max() * PENALTY_GROWTH <= PENALTY_MAX * system.k_initial.max():
             k *= PENALTY_GROWTH           # in place: the plan and the state see it
     state.lam += k * g

@@ -264,15 +264,18 @@ def frenet_directors(t, kb, vertex_edges, n_edges, min_kb):
             acc[j1, k] = 1.5 * kb[nv - 1, k] - 0.5 * kb[nv - 2, k]
     nrm = np.zeros((n_edges, 3))
     defined = np.zeros(n_edges, dtype=np.bool_)
-    for j in range(n_edges):
-        b = acc[j]
-        s = dot3(b, t[j])
-        for k in range(3):
-            b[k] -= s * t[j, k]
-        lb = norm3(b) / max(count[j], 1.0)
+    for j in range(n_edges):   # on tuples: the same operations without an allocation per edge
+        tj = vec(t, j)
+        b = vec(acc, j)
+        s = vdot(b, tj)
+        b = (b[0] - s * tj[0], b[1] - s * tj[1], b[2] - s * tj[2])
+        lb = vnorm(b) / max(count[j], 1.0)
         if lb > min_kb:
-            b = b / norm3(b)
-            nrm[j] = cross3(b, t[j])
+            nb = vnorm(b)
+            b = (b[0] / nb, b[1] / nb, b[2] / nb)
+            c = vcross(b, tj)
+            for k in range(3):
+                nrm[j, k] = c[k]
             defined[j] = True
     return nrm, defined
 

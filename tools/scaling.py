@@ -1,19 +1,34 @@
-"""Time to equilibrium and peak memory of the implicit solver from n = 100 to 100,000 edges.
+"""Time to equilibrium, cost per Newton iteration against one banded factorisation, round-off floor and peak
+memory of the implicit solver from n = 100 to 100,000 edges (and a million with ``--million``).
 
     python tools/scaling.py [--json] [--n 100 1000 10000 100000] [--png PATH]
+    python tools/scaling.py --million [--json]
 
 Two problems: ring torsion (scenarios/ring_torsion.py: an arc clamped at one end, end torque; solved from the
 rest state) and helix winding (scenarios/helix_winding.py: 200 edges per turn, so n/200 turns, both ends clamped
 on the stretched and overwound helix; solved from the uniform helix). Each (problem, n) runs in a fresh process
 (numba's cache makes that cheap) so that its peak resident memory is its own: reported is the growth of the
-peak RSS over the process baseline after compilation, and the peak of Python/NumPy allocations (tracemalloc).
-Reported per run: iterations, solve time, time per iteration, residual, error against the closed form. Fitted:
-the exponent p of time per iteration ~ n^p and of memory ~ n^p over the converged runs with n >= 1000.
+peak RSS over the process baseline after compilation (``rss_growth_mb``, per edge ``rss_per_edge_kb``), the
+process peak (``peak_rss_mb``) and the peak of Python/NumPy allocations (tracemalloc, in a second short solve).
 
-Limit: the Newton matrix of a rod in node positions has a condition number growing like n^4 (edge bending
-stiffness ~ 1/h^3 against the softest global mode ~ h / L^4). Ring torsion is a global, soft-mode response: past
-n ~ 30,000 (L = 3 a0) double precision cannot resolve it and the solve ends at its 120 s budget, which the
-table reports. Helix winding (each turn resolved by 200 edges, the response local to a turn) is not limited.
+Reported per run (a JSON row with ``--json``): ``problem``, ``n``, ``converged``, ``status``, ``residual``,
+``tol``, iterations, ``solve_s``, ``setup_s`` (shape, rod and initial state), ``s_per_iteration``, ``dgbsv_s``
+(one LAPACK banded factor-and-solve of the same Newton matrix, timed in the same process after the solve:
+the floor of a Newton iteration) and ``per_iteration_ratio_to_dgbsv``; the time split of the solve
+(``assembly_s``, ``factorisation_s``, ``line_search_s``, from ``SolveResult.timings``); the error against the
+closed form; and three round-off floors at the final state: ``residual_floor`` (the solver's bound eps |K| |q|),
+``noise_floor`` (measured: the residual that rounding every stored coordinate by half an ulp produces) and
+``noise_floor_displacement`` (measured the same way for a displacement u = x - x_start stored relative to the
+initial state, rounded at max(|u|, l): what a displacement-based evaluation would reach; der does not have
+one). Fitted: the exponent p of time per iteration, solve time, memory, setup, dgbsv and floor ~ n^p over the
+converged runs with n >= 1000.
+
+Limit: positions are absolute coordinates of size up to L, rounded at eps |x|; an edge of length h = L / n then
+carries eps L / h relative error, and the stiffness of the Newton matrix (stretching penalty and bending, ~ A1 /
+h^3) turns it into force noise eps |K| |x|: the floor grows like n^3 (ring torsion, fixed L) or n (helix winding,
+fixed h, L ~ n). The measured noise is 0.7x the bound, and a solve ends at 0.3-0.5x of it. Ring torsion is a
+global soft-mode response to a small torque: its floor passes 1e-8 below n = 1000 and the error follows the floor
+past n ~ 10^4 (issue 17).
 """
 import argparse
 import json
@@ -33,7 +48,37 @@ sys.path.insert(0, os.path.join(HERE, ".."))
 TOL = 1e-8
 
 
-def dgbsv_seconds(scene, state, repeat=3):
+def rounding_noise(system, state, scales, reference, samples=3, seed=0):
+    """The residual that rounding the coordinates alone produces at ``state``, measured: the largest change of
+    the residual vector (in residual units) when every node coordinate moves by one rounding step in a random
+    direction, max over ``samples`` draws. With ``reference`` None the step is that of the stored absolute
+    coordinates (half an ulp of |x|): the floor der has. With a reference state it is the rounding step of a
+    displacement u = x - x_ref stored relative to it (half an ulp of max(|u|, l) per coordinate, l the edge length:
+    an edge evaluated as rest edge + (u_b - u_a) is rounded at its own length): the floor a displacement-based
+    evaluation would have (issue 17; not implemented in der)."""
+    from der.solvers.system import evaluate_system, residual_norm, residual_vector
+
+    rng = np.random.default_rng(seed)
+    q = state.q.copy()
+    evaluate_system(system, state, 1)
+    R0 = residual_vector(system)
+    pos = np.zeros(q.size, dtype=bool)
+    pos.reshape(-1, 4)[:, :3] = True
+    if reference is None:
+        size = np.abs(q)
+    else:
+        size = np.maximum(np.abs(q - reference.q), float(system.rod.l_bar.min()))
+    step = 0.5 * np.finfo(float).eps * size * pos
+    worst = 0.0
+    trial = state.copy()
+    for _ in range(samples):
+        trial.q[:] = q + step * rng.choice([-1.0, 1.0], size=q.size)
+        evaluate_system(system, trial, 1)
+        worst = max(worst, residual_norm(system, residual_vector(system) - R0, scales))
+    return worst
+
+
+def dgbsv_seconds(scene, state, start=None, repeat=3):
     """Seconds of one LAPACK banded factor-and-solve (``dgbsv``) of the Newton matrix of ``scene`` at ``state``
     -- what one Newton iteration cannot go below -- measured here, beside der's iteration (best of ``repeat``;
     the copy of the band that dgbsv overwrites is timed apart and not counted). Also returns the round-off
@@ -47,7 +92,11 @@ def dgbsv_seconds(scene, state, repeat=3):
     system = build_system(scene, der.SolverOptions())
     st = prepare_state(system, state)
     evaluate_system(system, st, 2)
-    floor = residual_floor(system, st, load_scales(system, st))
+    scales = load_scales(system, st)
+    floor = residual_floor(system, st, scales)
+    noise = {"noise_floor": rounding_noise(system, st, scales, None),
+             "noise_floor_displacement": rounding_noise(system, st, scales, start)}
+    evaluate_system(system, st, 2)
     kl, ku, perm = system.kl, system.ku, system.perm
     ab = system.ab
     diag = np.abs(ab[kl + ku, :][perm])
@@ -63,7 +112,7 @@ def dgbsv_seconds(scene, state, repeat=3):
         t1 = time.perf_counter()
         band_solve(work, kl, ku, perm, R)
         best = min(best, time.perf_counter() - t1)
-    return best, floor
+    return best, floor, noise
 
 
 def single(problem, n, time_budget=120.0, trace=True):
@@ -81,12 +130,13 @@ def single(problem, n, time_budget=120.0, trace=True):
                     options=der.SolverOptions(time_budget=time_budget, tol=TOL))
     peak_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     s_per_iteration = res.wall_time / max(res.iterations, 1)
-    t_dgbsv, floor = dgbsv_seconds(scene, res.state)
+    start = state if state is not None else scene.rod.rest_state()
+    t_dgbsv, floor, noise = dgbsv_seconds(scene, res.state, start)
     out = {"problem": problem, "n": n, "converged": res.converged, "status": res.status, "tol": TOL,
            "iterations": res.iterations, "solve_s": res.wall_time, "setup_s": setup_s,
            "s_per_iteration": s_per_iteration, "dgbsv_s": t_dgbsv,
            "per_iteration_ratio_to_dgbsv": s_per_iteration / t_dgbsv, "residual": res.residual,
-           "residual_floor": floor, "message": res.message, "error": error(res.state),
+           "residual_floor": floor, **noise, "message": res.message, "error": error(res.state),
            "rss_growth_mb": (peak_rss - base_rss) / 1024.0, "peak_rss_mb": peak_rss / 1024.0,
            "rss_per_edge_kb": (peak_rss - base_rss) / n, "compile_s": compile_s,
            **{f"{k}_s": v for k, v in res.timings.items()}}

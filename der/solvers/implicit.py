@@ -67,6 +67,14 @@ def solve_implicit(system, state, options, progress=None, recorder=None):
     return second
 
 
+def _assemble(system, state, timings):
+    """Forces and band Jacobian at ``state`` (system.grad, system.fext, system.ab); returns True."""
+    t_phase = time.perf_counter()
+    evaluate_system(system, state, 2)
+    timings["assembly"] += time.perf_counter() - t_phase
+    return True
+
+
 def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_start=None):
     """The pseudo-transient continuation loop from the pseudo-time step ``dt``; iterations are counted from
     ``it`` and the time budget from ``t_start`` (so that a restart shares both with the first attempt)."""
@@ -89,7 +97,10 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     try:
         while True:
             t_phase = time.perf_counter()
-            energy = evaluate_system(system, state, 2)
+            # forces first; the band Jacobian only once a step (or a floor estimate) needs it: an iteration that
+            # converges or updates the multipliers does not (issue 17: 12 of 28 assemblies of ring torsion)
+            energy = evaluate_system(system, state, 1)
+            have_jacobian = False
             R = residual_vector(system)
             scales = load_scales(system, state)
             residual = residual_norm(system, R, scales)
@@ -121,9 +132,12 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 potential_best = min(potential_best, potential)
             else:
                 since_best += 1
-            if strain_ok and (since_best >= STALL_ITERATIONS or (
-                    since_best >= FLOOR_STALL_ITERATIONS
-                    and residual <= FLOOR_FACTOR * residual_floor(system, state, scales))):
+            stalled = since_best >= STALL_ITERATIONS
+            if strain_ok and not stalled and since_best >= FLOOR_STALL_ITERATIONS:
+                have_jacobian = have_jacobian or _assemble(system, state, timings)
+                stalled = residual <= FLOOR_FACTOR * residual_floor(system, state, scales)
+            if strain_ok and stalled:
+                have_jacobian = have_jacobian or _assemble(system, state, timings)
                 status, floor, message = floor_verdict(system, state, scales, residual, options.tol,
                                                        f"no progress in {since_best} Newton steps")
                 break
@@ -143,6 +157,13 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 status, message = "time_budget", f"time budget of {options.time_budget:g} s used up"
                 break
             it += 1
+            if not have_jacobian:
+                have_jacobian = _assemble(system, state, timings)
+                R = residual_vector(system)   # the same forces, summed as the Jacobian's pass sums them
+                if not np.isfinite(R).all():
+                    state.copy_from(last_good)
+                    status, message = "nonfinite", (f"non-finite force at iteration {it}; last finite state kept")
+                    break
             diag = np.abs(system.ab[kl + ku, :][perm])
             diag[diag == 0] = 1.0
             fext = system.fext.copy()

@@ -132,3 +132,22 @@ def test_evaluate_equals_term_by_term_assembly(closed):
     g1 = np.zeros(rod.n_dof)
     evaluate(plan, q, state.d1, state.reference_twist, lam, 1, g1, f, ab0, kl, ku, perm)
     assert np.abs(g1 - g).max() <= 1e-13 * np.abs(g).max()
+
+
+def test_dot_equals_numpy_to_round_off():
+    from der.linalg import dot
+
+    rng = np.random.default_rng(4)
+    for n in (0, 1, 3, 4, 7, 1001):
+        a, b = rng.standard_normal(n), rng.standard_normal(n)
+        assert abs(dot(a, b) - float(a @ b)) <= 1e-14 * max(float(np.abs(a) @ np.abs(b)), 1e-300)
+
+
+def test_implicit_solve_reports_its_time_split():
+    rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, 1, 60), 1.0, 1.5)
+    scene = der.Scene(rod, loads=[der.end_force([0, 0, 1e-3])], constraints=[der.clamp("start")])
+    res = der.solve(scene, stability=False)
+    assert res.converged and res.iterations > 0
+    assert set(res.timings) == {"assembly", "factorisation", "line_search"}
+    assert all(v > 0 for v in res.timings.values())
+    assert sum(res.timings.values()) <= res.wall_time

@@ -13,8 +13,9 @@ process peak (``peak_rss_mb``) and the peak of Python/NumPy allocations (tracema
 
 Reported per run (a JSON row with ``--json``): ``problem``, ``n``, ``converged``, ``status``, ``residual``,
 ``tol``, iterations, ``solve_s``, ``setup_s`` (shape, rod and initial state), ``s_per_iteration``, ``dgbsv_s``
-(one LAPACK banded factor-and-solve of the same Newton matrix, timed in the same process after the solve:
-the floor of a Newton iteration) and ``per_iteration_ratio_to_dgbsv``; the time split of the solve
+(one LAPACK banded factor-and-solve of the same Newton matrix, timed in the same process after the solve, best
+of 3 -- the iterations are averages, so on a shared machine the ratio leans against der: the floor of a Newton
+iteration) and ``per_iteration_ratio_to_dgbsv``; the time split of the solve
 (``assembly_s``, ``factorisation_s``, ``line_search_s``, from ``SolveResult.timings``); the error against the
 closed form; and three round-off floors at the final state: ``residual_floor`` (the solver's bound eps |K| |q|),
 ``noise_floor`` (measured: the residual that rounding every stored coordinate by half an ulp produces) and
@@ -96,22 +97,19 @@ def dgbsv_seconds(scene, state, start=None, repeat=3):
     floor = residual_floor(system, st, scales)
     noise = {"noise_floor": rounding_noise(system, st, scales, None),
              "noise_floor_displacement": rounding_noise(system, st, scales, start)}
-    evaluate_system(system, st, 2)
     kl, ku, perm = system.kl, system.ku, system.perm
-    ab = system.ab
-    diag = np.abs(ab[kl + ku, :][perm])
-    diag[diag == 0] = 1.0
-    add_diagonal(ab, kl, ku, perm, diag, 1e-3)
-    constrain_band(ab, kl, ku, perm, system.fixed, 1.0)
-    work = np.empty_like(ab)
-    R = residual_vector(system)
     best = np.inf
-    for _ in range(repeat):
+    for _ in range(repeat):   # assembled again each time rather than copied: no second band in memory
+        evaluate_system(system, st, 2)
+        ab = system.ab
+        diag = np.abs(ab[kl + ku, :][perm])
+        diag[diag == 0] = 1.0
+        add_diagonal(ab, kl, ku, perm, diag, 1e-3)
+        constrain_band(ab, kl, ku, perm, system.fixed, 1.0)
+        R = residual_vector(system)
         t0 = time.perf_counter()
-        work[:] = ab
-        t1 = time.perf_counter()
-        band_solve(work, kl, ku, perm, R)
-        best = min(best, time.perf_counter() - t1)
+        band_solve(ab, kl, ku, perm, R)
+        best = min(best, time.perf_counter() - t0)
     return best, floor, noise
 
 
@@ -275,7 +273,7 @@ def million(args):
               f"factorisation {r['factorisation_s']:.2f} + line search {r['line_search_s']:.2f} + other {other:.2f}; "
               f"one dgbsv {r['dgbsv_s']:.3f} s, per iteration {r['per_iteration_ratio_to_dgbsv']:.2f} x dgbsv")
         print(f"  CPU time of the solve: user {r['solve_cpu_user_s']:.2f} s, system {r['solve_cpu_system_s']:.2f} s "
-              f"(the system time is mostly the kernel zeroing the band's pages on first touch)")
+              f"(system time: page faults, the first touch of the band's pages and of temporaries)")
         print(f"  peak RSS {r['peak_rss_mb']:.0f} MB (growth over the compiled process {r['rss_growth_mb']:.0f} MB, "
               f"{r['rss_per_edge_kb']:.2f} kB per edge)")
     else:

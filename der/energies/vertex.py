@@ -20,8 +20,6 @@ def bend_twist_hessian(q, ed, vertex_nodes, vertex_edges, reference_twist, weld,
     ``(bending energy, twisting energy)``. Arguments as for ``bend_hessian`` and ``twist_hessian``."""
     g8 = np.empty(8)
     H8 = np.empty((8, 8))
-    g8t = np.empty(8)
-    H8t = np.empty((8, 8))
     H11 = np.empty((11, 11))
     work = np.empty((5, 8))
     dofs = np.empty(11, dtype=np.int64)
@@ -30,12 +28,8 @@ def bend_twist_hessian(q, ed, vertex_nodes, vertex_edges, reference_twist, weld,
     for v in range(vertex_edges.shape[0]):
         b = A1 / voronoi[v]
         e_bend += _bend_local(ed, vertex_edges, weld, v, kappa_bar, b, b, 2, g8, H8, work)
-        e_twist += _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v], A2 / voronoi[v], 2, g8t,
-                                H8t, work)
-        for i in range(8):
-            g8[i] += g8t[i]
-            for j in range(8):
-                H8[i, j] += H8t[i, j]
+        e_twist += _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v], A2 / voronoi[v], 2, g8,
+                                H8, work, True)   # added onto the bending of the same vertex
         scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
                                 vertex_edges[v, 0], vertex_edges[v, 1], g8)
         expand_vertex_hessian(H8, H11)

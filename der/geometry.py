@@ -15,7 +15,7 @@ All angles are in radians, right-handed.
 import numpy as np
 from numba import njit
 
-from .stencils import edge_dofs, scatter_band, vangle, vdot, vec, vnorm, vscale, vsub, vtransport
+from .stencils import edge_dofs, scatter_band, vangle, vcross, vdot, vec, vnorm, vscale, vsub, vtransport
 
 # ---------------------------------------------------------------------------------------------
 # small vector helpers (3-vectors as length-3 arrays)
@@ -92,9 +92,13 @@ def tangents(q, edge_nodes):
     """Unit tangents of all edges, shape (n_edges, 3)."""
     n = edge_nodes.shape[0]
     t = np.empty((n, 3))
-    for j in range(n):
-        e = edge_vector(q, edge_nodes, j)
-        t[j] = e / norm3(e)
+    for j in range(n):   # tuples, not edge_vector's arrays: no allocation per edge
+        a = 4 * edge_nodes[j, 0]
+        b = 4 * edge_nodes[j, 1]
+        e = (q[b] - q[a], q[b + 1] - q[a + 1], q[b + 2] - q[a + 2])
+        le = vnorm(e)
+        for k in range(3):
+            t[j, k] = e[k] / le
     return t
 
 
@@ -117,8 +121,13 @@ def curvature_binormal(te, tf):
 def curvature_binormals(t, vertex_edges):
     nv = vertex_edges.shape[0]
     kb = np.empty((nv, 3))
-    for v in range(nv):
-        kb[v] = curvature_binormal(t[vertex_edges[v, 0]], t[vertex_edges[v, 1]])
+    for v in range(nv):   # curvature_binormal on tuples (same operations, no allocation)
+        te = vec(t, vertex_edges[v, 0])
+        tf = vec(t, vertex_edges[v, 1])
+        c = vcross(te, tf)
+        den = 1.0 + vdot(te, tf)
+        for k in range(3):
+            kb[v, k] = 2.0 * c[k] / den
     return kb
 
 
@@ -176,6 +185,19 @@ def edge_frames(q, edge_nodes, d1):
 def reference_twist_angle(te, d1e, tf, d1f):
     """Signed angle about tf from d1e (transported from te to tf) to d1f, in (-pi, pi]."""
     return signed_angle(parallel_transport(d1e, te, tf), d1f, tf)
+
+
+@njit(cache=True)
+def reference_twists(t, d1, vertex_edges):
+    """``reference_twist_angle`` of every vertex (edges e, f = vertex_edges[v]), in one pass; shape (n_vertices,)."""
+    nv = vertex_edges.shape[0]
+    out = np.empty(nv)
+    for v in range(nv):
+        a = vertex_edges[v, 0]
+        b = vertex_edges[v, 1]
+        tb = vec(t, b)   # reference_twist_angle on tuples (same operations, no allocation)
+        out[v] = vangle(vtransport(vec(d1, a), vec(t, a), tb), vec(d1, b), tb)
+    return out
 
 
 @njit(cache=True)
@@ -242,15 +264,18 @@ def frenet_directors(t, kb, vertex_edges, n_edges, min_kb):
             acc[j1, k] = 1.5 * kb[nv - 1, k] - 0.5 * kb[nv - 2, k]
     nrm = np.zeros((n_edges, 3))
     defined = np.zeros(n_edges, dtype=np.bool_)
-    for j in range(n_edges):
-        b = acc[j]
-        s = dot3(b, t[j])
-        for k in range(3):
-            b[k] -= s * t[j, k]
-        lb = norm3(b) / max(count[j], 1.0)
+    for j in range(n_edges):   # on tuples: the same operations without an allocation per edge
+        tj = vec(t, j)
+        b = vec(acc, j)
+        s = vdot(b, tj)
+        b = (b[0] - s * tj[0], b[1] - s * tj[1], b[2] - s * tj[2])
+        lb = vnorm(b) / max(count[j], 1.0)
         if lb > min_kb:
-            b = b / norm3(b)
-            nrm[j] = cross3(b, t[j])
+            nb = vnorm(b)
+            b = (b[0] / nb, b[1] / nb, b[2] / nb)
+            c = vcross(b, tj)
+            for k in range(3):
+                nrm[j, k] = c[k]
             defined[j] = True
     return nrm, defined
 

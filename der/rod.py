@@ -11,9 +11,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import validate
-from .energies.bend import material_curvatures
+from .energies.bend import material_curvatures_all
 from .geometry import (
-    curvature_binormals, edge_frames, frenet_directors, parallel_transport, reference_twist_angle, tangents,
+    curvature_binormals, edge_frames, frenet_directors, parallel_transport, reference_twists, tangents,
 )
 
 
@@ -476,12 +476,14 @@ def frenet_frame_of_shape(x, closed, director=None, min_curvature=1e-9):
     nrm = nrm.copy()
     if director is not None:
         director = np.asarray(director, dtype=float)
-        for j in np.flatnonzero(~defined):
-            d = director if director.ndim == 1 else director[j]
-            p = d - (d @ t[j]) * t[j]
-            if np.linalg.norm(p) < 1e-12:
-                raise ValueError(f"director is parallel to edge {j}; give a director normal to the rod")
-            nrm[j] = p / np.linalg.norm(p)
+        js = np.flatnonzero(~defined)
+        d = np.broadcast_to(director, (n_edges, 3))[js]
+        p = d - np.einsum("ij,ij->i", d, t[js])[:, None] * t[js]
+        lp = np.sqrt(np.einsum("ij,ij->i", p, p))
+        if js.size and np.any(lp < 1e-12):
+            j = int(js[np.argmax(lp < 1e-12)])
+            raise ValueError(f"director is parallel to edge {j}; give a director normal to the rod")
+        nrm[js] = p / lp[:, None]
     elif not defined.all():
         if not defined.any():
             nrm[0] = _perpendicular(t[0])
@@ -564,12 +566,12 @@ def rod_from_shape(shape, A1, A2, EA=None, rho_A=1.0, rho_J=None):
 
     q = np.zeros(4 * x.shape[0])
     q.reshape(-1, 4)[:, :3] = x
-    rest_twist = np.array([reference_twist_angle(t[a], d1[a], t[b], d1[b]) for a, b in vertex_edges])
+    # one kernel pass per quantity (a Python loop over vertices cost 4 s at 10^5 edges)
+    rest_twist = reference_twists(t, np.ascontiguousarray(d1), vertex_edges)
     ed = edge_frames(q, edge_nodes, d1)
     no_weld = np.zeros(vertex_nodes.shape[0])
     # natural curvatures in each edge's frame, with the energy's own kernel: the rest state is force-free
-    kappa_bar_edges = np.array([material_curvatures(ed, vertex_edges, no_weld, v)
-                                for v in range(vertex_nodes.shape[0])]).reshape(-1, 2, 2)
+    kappa_bar_edges = material_curvatures_all(ed, vertex_edges, no_weld).reshape(-1, 2, 2)
     kappa_bar = kappa_bar_edges.mean(axis=1)
     voronoi = 0.5 * (le[vertex_edges[:, 0]] + le[vertex_edges[:, 1]])
     return Rod(closed=closed, A1=float(A1), A2=float(A2), EA=None if EA is None else float(EA),

@@ -15,7 +15,9 @@ from . import validate
 from .energies.bend import bend_energy, bend_gradient, bend_hessian
 from .energies.stretch import stretch_energy, stretch_gradient, stretch_hessian
 from .energies.twist import twist_energy, twist_gradient, twist_hessian
+from .energies.vertex import bend_twist_hessian, stretch_bend_twist_hessian
 from .geometry import add_transport_jacobian, edge_frames
+from .linalg import zero_band
 from .loads import (
     DistributedForce, EndForce, EndTorque, FollowerForce, PointForce, PointTorque, TwistingMoment, add_dead_torques,
     add_follower_forces, add_follower_torques, add_nodal_forces, add_theta_moments,
@@ -224,9 +226,11 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
     grad[:] = 0.0
     fext[:] = 0.0
     if order >= 2:
-        ab[:, :] = 0.0
+        zero_band(ab)
     energy = 0.0
-    if plan.has_stretch:
+    # all three terms at order 2: one pass over the vertex stencils, each edge's stretching inside one of them
+    full = order >= 2 and plan.has_stretch and plan.has_bend and plan.has_twist
+    if plan.has_stretch and not full:
         plan.counters[0] += 1
         if order >= 2:
             energy += stretch_hessian(q, plan.edge_nodes, plan.l_bar, plan.k_stretch, lam, grad, ab, kl, ku, perm)
@@ -238,7 +242,28 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
         ed = edge_frames(q, plan.edge_nodes, d1)   # one pass over edges, shared by bending and twisting
     else:
         ed = np.empty((0, 10))
-    if plan.has_bend:
+    if full:
+        plan.counters[0] += 1
+        plan.counters[1] += 1
+        plan.counters[2] += 1
+        e_stretch, e_bend, e_twist = stretch_bend_twist_hessian(
+            q, ed, plan.edge_nodes, plan.vertex_nodes, plan.vertex_edges, plan.l_bar, plan.k_stretch, lam,
+            reference_twist, plan.weld, plan.kappa_bar, plan.twist_bar, plan.voronoi, plan.A1, plan.A2, grad, ab, kl,
+            ku, perm)
+        energy += e_stretch
+        energy += e_bend
+        energy += e_twist
+    fused = order >= 2 and plan.has_bend and plan.has_twist and not full
+    if fused:
+        # one pass over the vertex stencils for both terms: half the scattering into the band (issue 17)
+        plan.counters[1] += 1
+        plan.counters[2] += 1
+        e_bend, e_twist = bend_twist_hessian(q, ed, plan.vertex_nodes, plan.vertex_edges, reference_twist, plan.weld,
+                                             plan.kappa_bar, plan.twist_bar, plan.voronoi, plan.A1, plan.A2, grad,
+                                             ab, kl, ku, perm)
+        energy += e_bend
+        energy += e_twist
+    if plan.has_bend and not fused and not full:
         plan.counters[1] += 1
         if order >= 2:
             energy += bend_hessian(ed, plan.vertex_nodes, plan.vertex_edges, plan.weld, plan.kappa_bar,
@@ -248,7 +273,7 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
                                     plan.voronoi, plan.A1, grad)
         else:
             energy += bend_energy(ed, plan.vertex_edges, plan.weld, plan.kappa_bar, plan.voronoi, plan.A1)
-    if plan.has_twist:
+    if plan.has_twist and not fused and not full:
         plan.counters[2] += 1
         if order >= 2:
             energy += twist_hessian(q, ed, plan.vertex_nodes, plan.vertex_edges, reference_twist, plan.weld,

@@ -220,8 +220,25 @@ def scatter_band(ab, kl, ku, perm, dofs, H, scale):
     """
     m = dofs.shape[0]
     off = kl + ku
-    for a in range(m):
-        i = perm[dofs[a]]
+    # column by column: a column of ``ab`` (Fortran order) is contiguous, and the stencil's rows are consecutive
+    # positions of it (row by row wrote one entry per column, 2 kl + ku + 1 doubles apart, and the band
+    # outgrew the cache at 10^4 nodes)
+    base = perm[dofs[0]]
+    contiguous = True
+    for a in range(1, m):
+        if perm[dofs[a]] != base + a:
+            contiguous = False
+            break
+    if contiguous:
+        # an open rod's stencils are consecutive DOFs: a dense block, no index lookups in the inner loop
         for b in range(m):
-            j = perm[dofs[b]]
+            r0 = off - b
+            j = base + b
+            for a in range(m):
+                ab[r0 + a, j] += scale * H[a, b]
+        return
+    for b in range(m):
+        j = perm[dofs[b]]
+        for a in range(m):
+            i = perm[dofs[a]]
             ab[off + i - j, j] += scale * H[a, b]

@@ -126,6 +126,8 @@ def _run_kernels():
     dg.profile(ring, res.state)
     dg.linking_number(ring, res.state)
     dg.profile(rod, rod.rest_state())
+    from .geometry import edge_lengths
+    edge_lengths(rod.rest_q, rod.edge_nodes)   # (and edge_vector, no longer reached through tangents)
     # the round-off floor of the residual: compiled only when a solve comes near it (it was left to the first
     # such solve, ~1 s of compilation counted as solver time)
     from .solvers import SolverOptions

@@ -25,7 +25,7 @@ import der
 from der import closed_forms as cf
 from der import diagnostics as dg
 from der.cli import Range, scenario_main, validator
-from der.geometry import reference_twist_angle, tangents
+from der.geometry import reference_twists, tangents
 from der.rod import RodState, frenet_frame_of_shape
 
 PARAMETERS = [
@@ -62,7 +62,7 @@ def deformed_state(rod, eta, phi, lam):
     t, d1, _ = frenet_frame_of_shape(x, False)
     q = np.zeros(rod.n_dof)
     q.reshape(-1, 4)[:, :3] = x
-    ref = np.array([reference_twist_angle(t[e], d1[e], t[f_], d1[f_]) for e, f_ in rod.vertex_edges])
+    ref = reference_twists(t, np.ascontiguousarray(d1), rod.vertex_edges)   # one kernel pass (4 s at 10^6 as a loop)
     return RodState(q, d1, tangents(q, rod.edge_nodes), ref, np.zeros(rod.n_edges))
 
 

@@ -8,6 +8,11 @@ vectorised over vertices, scattered with np.add.at; its bending Hessian is assem
 at a time, unlike the kernel), on the same random configuration of a helix. It first
 checks that both give the same numbers. Reported: median seconds over ``--repeat`` runs, node-evaluations per
 second and the NumPy/numba ratio. Compilation is excluded (warm-up call first) and reported apart.
+
+Side by side in the same run (issue 17): the gradient + band Hessian assembly against the gradient alone
+(``hess_over_grad``), the assembly as it was before issue 17 (``hess_legacy_s``, kept below as the baseline:
+row-by-row scattering, bending and twisting scattered in two passes) and one LAPACK ``dgbsv`` on the same band
+(``dgbsv_s``), the floor of a Newton iteration.
 """
 import argparse
 import json
@@ -22,8 +27,73 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 import der  # noqa: E402
 from der.geometry import transport_frames  # noqa: E402
-from der.linalg import band_layout, new_band  # noqa: E402
+from der.linalg import band_layout, band_solve, new_band  # noqa: E402
 from der.scene import evaluate, make_plan  # noqa: E402
+from numba import njit  # noqa: E402
+from der.energies.bend import _bend_local  # noqa: E402
+from der.energies.stretch import _stretch_local  # noqa: E402
+from der.energies.twist import _twist_local  # noqa: E402
+from der.geometry import add_transport_jacobian, edge_frames  # noqa: E402
+from der.stencils import edge_dofs, expand_vertex_hessian, scatter_vertex_gradient, vertex_dofs  # noqa: E402
+
+# ---------------------------------------------------------------------------------------------
+# the assembly as it was before issue 17 (the baseline of the "hess_legacy" column): the band zeroed and
+# scattered row by row (2 kl + ku + 1 doubles between consecutive writes), bending and twisting in two passes,
+# each expanded and scattered on its own. Same local kernels as der's.
+# ---------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _scatter_rowwise(ab, kl, ku, perm, dofs, H):
+    m = dofs.shape[0]
+    off = kl + ku
+    for a in range(m):
+        i = perm[dofs[a]]
+        for b in range(m):
+            j = perm[dofs[b]]
+            ab[off + i - j, j] += H[a, b]
+
+
+@njit(cache=True)
+def legacy_hessian(plan, q, d1, reference_twist, lam, grad, ab, kl, ku, perm):
+    grad[:] = 0.0
+    ab[:, :] = 0.0
+    g6 = np.empty(6)
+    H6 = np.empty((6, 6))
+    d6 = np.empty(6, dtype=np.int64)
+    energy = 0.0
+    for j in range(plan.edge_nodes.shape[0]):
+        energy += _stretch_local(q, plan.edge_nodes, j, plan.l_bar[j], plan.k_stretch[j], lam[j], 2, g6, H6)
+        edge_dofs(plan.edge_nodes, j, d6)
+        for a in range(6):
+            grad[d6[a]] += g6[a]
+        _scatter_rowwise(ab, kl, ku, perm, d6, H6)
+    ed = edge_frames(q, plan.edge_nodes, d1)
+    g8 = np.empty(8)
+    H8 = np.empty((8, 8))
+    H11 = np.empty((11, 11))
+    work = np.empty((5, 8))
+    dofs = np.empty(11, dtype=np.int64)
+    vn, ve = plan.vertex_nodes, plan.vertex_edges
+    for term in range(2):
+        for v in range(ve.shape[0]):
+            if term == 0:
+                b = plan.A1 / plan.voronoi[v]
+                energy += _bend_local(ed, ve, plan.weld, v, plan.kappa_bar, b, b, 2, g8, H8, work)
+            else:
+                energy += _twist_local(q, ed, ve, reference_twist, plan.weld, v, plan.twist_bar[v],
+                                       plan.A2 / plan.voronoi[v], 2, g8, H8, work)
+            scatter_vertex_gradient(grad, vn[v, 0], vn[v, 1], vn[v, 2], ve[v, 0], ve[v, 1], g8)
+            expand_vertex_hessian(H8, H11)
+            vertex_dofs(vn, ve, v, dofs)
+            _scatter_rowwise(ab, kl, ku, perm, dofs, H11)
+    n_edges = plan.edge_nodes.shape[0]
+    dE_dtheta = np.empty(n_edges)
+    for j in range(n_edges):
+        dE_dtheta[j] = grad[4 * j + 3]
+    add_transport_jacobian(q, plan.edge_nodes, dE_dtheta, ab, kl, ku, perm)
+    return energy
+
 
 # ---------------------------------------------------------------------------------------------
 # the NumPy reference implementation (vectorised over edges and vertices)
@@ -193,6 +263,7 @@ def main(argv=None):
     kl, ku, perm = band_layout(rod.n_nodes, rod.closed)
     g, f, ab = np.zeros(rod.n_dof), np.zeros(rod.n_dof), new_band(rod.n_dof, kl, ku)
     evaluate(plan, st.q, st.d1, st.reference_twist, lam, 2, g, f, ab, kl, ku, perm)
+    legacy_hessian(plan, st.q, st.d1, st.reference_twist, lam, g, ab, kl, ku, perm)
     compile_s = time.perf_counter() - t0
     rows = []
     for n in args.n:
@@ -207,25 +278,52 @@ def main(argv=None):
         def numba_hess():
             evaluate(plan, st.q, st.d1, st.reference_twist, lam, 2, g, f, ab, kl, ku, perm)
 
+        g_old, ab_old = np.zeros(rod.n_dof), new_band(rod.n_dof, kl, ku)
+
+        def legacy_hess():
+            legacy_hessian(plan, st.q, st.d1, st.reference_twist, lam, g_old, ab_old, kl, ku, perm)
+
+        work = new_band(rod.n_dof, kl, ku)
+
+        def dgbsv():   # LAPACK factor-and-solve of the band (on a copy: it overwrites); the copy is timed apart
+            work[:] = ab
+            band_solve(work, kl, ku, perm, rhs)
+
+        def copy():
+            work[:] = ab
+
+        rhs = rng.standard_normal(rod.n_dof)
+
         # same numbers? (the numba Jacobian also holds the frame-transport term; compare the gradient and the
         # symmetric part of the band)
         gn, abn = numpy_evaluate(rod, st.q, st.d1, st.reference_twist, k, lam, True, kl, ku, perm)
         numba_hess()
         g_err = np.abs(gn - g).max() / np.abs(g).max()
-        from der.geometry import add_transport_jacobian
         abt = new_band(rod.n_dof, kl, ku)
         add_transport_jacobian(st.q, rod.edge_nodes, g[3::4][: rod.n_edges].copy(), abt, kl, ku, perm)
         h_err = np.abs(abn - (ab - abt)).max() / np.abs(ab).max()
         assert g_err < 1e-9 and h_err < 1e-9, (g_err, h_err)
+        legacy_hess()
+        legacy_diff = max(np.abs(g_old - g).max() / np.abs(g).max(), np.abs(ab_old - ab).max() / np.abs(ab).max())
+        assert legacy_diff < 1e-12, legacy_diff
+        # a solvable band for the dgbsv timing: a dominant diagonal
+        ab[:, :] += 1e3 * np.abs(ab).max() * (np.arange(ab.shape[0]) == kl + ku)[:, None]
+        t_solve = max(timed(dgbsv, args.repeat) - timed(copy, args.repeat), 1e-9)
+        numba_hess()
         r = {"n": n, "grad_numba_s": timed(numba_grad, args.repeat),
              "grad_numpy_s": timed(lambda: numpy_evaluate(rod, st.q, st.d1, st.reference_twist, k, lam, False,
                                                           kl, ku, perm), args.repeat),
              "hess_numba_s": timed(numba_hess, args.repeat),
+             "hess_legacy_s": timed(legacy_hess, args.repeat),
+             "dgbsv_s": t_solve, "max_rel_diff_legacy": legacy_diff,
              "hess_numpy_s": timed(lambda: numpy_evaluate(rod, st.q, st.d1, st.reference_twist, k, lam, True,
                                                           kl, ku, perm), args.repeat),
              "max_rel_diff_grad": g_err, "max_rel_diff_hess": h_err}
         r["grad_ratio"] = r["grad_numpy_s"] / r["grad_numba_s"]
         r["hess_ratio"] = r["hess_numpy_s"] / r["hess_numba_s"]
+        r["hess_over_grad"] = r["hess_numba_s"] / r["grad_numba_s"]
+        r["hess_legacy_over_grad"] = r["hess_legacy_s"] / r["grad_numba_s"]
+        r["legacy_over_new"] = r["hess_legacy_s"] / r["hess_numba_s"]
         r["grad_node_evals_per_s"] = rod.n_nodes / r["grad_numba_s"]
         r["hess_node_evals_per_s"] = rod.n_nodes / r["hess_numba_s"]
         rows.append(r)
@@ -242,6 +340,12 @@ def main(argv=None):
         print(f"{r['n']:>7} {r['grad_numba_s']:>11.2e} {r['grad_numpy_s']:>11.2e} {r['grad_ratio']:>7.1f} "
               f"{r['hess_numba_s']:>11.2e} {r['hess_numpy_s']:>11.2e} {r['hess_ratio']:>7.1f} "
               f"{r['grad_node_evals_per_s']:>20.3e}")
+    print("assembly of gradient + band Hessian against the gradient alone, der's against the pre-issue-17 kernel "
+          "(same run), and one dgbsv of the same band:")
+    print(f"{'n':>7} {'hess/grad':>10} {'legacy/grad':>12} {'legacy/new':>11} {'dgbsv s':>10} {'hess/dgbsv':>11}")
+    for r in rows:
+        print(f"{r['n']:>7} {r['hess_over_grad']:>10.1f} {r['hess_legacy_over_grad']:>12.1f} "
+              f"{r['legacy_over_new']:>11.2f} {r['dgbsv_s']:>10.2e} {r['hess_numba_s'] / r['dgbsv_s']:>11.2f}")
     if exps:
         print("time ~ n^p: " + ", ".join(f"{k} = {v:.2f}" for k, v in exps.items()))
     if args.json:

@@ -51,6 +51,20 @@ def material_curvatures(ed, vertex_edges, weld, v):
 
 
 @njit(cache=True)
+def material_curvatures_all(ed, vertex_edges, weld):
+    """``material_curvatures`` of every vertex in one pass, shape (n_vertices, 4)."""
+    nv = vertex_edges.shape[0]
+    out = np.empty((nv, 4))
+    for v in range(nv):
+        k1e, k2e, k1f, k2f = material_curvatures(ed, vertex_edges, weld, v)
+        out[v, 0] = k1e
+        out[v, 1] = k2e
+        out[v, 2] = k1f
+        out[v, 3] = k2f
+    return out
+
+
+@njit(cache=True)
 def material_curvature(ed, vertex_edges, weld, v):
     """Mean of the two edges' material curvatures (kappa1, kappa2) at vertex v (what ``Rod.kappa_bar`` holds)."""
     k1e, k2e, k1f, k2f = material_curvatures(ed, vertex_edges, weld, v)

@@ -78,7 +78,10 @@ def stretch_gradient(q, edge_nodes, l_bar, k, lam, grad):
 
 @njit(cache=True)
 def stretch_hessian(q, edge_nodes, l_bar, k, lam, grad, ab, kl, ku, perm):
-    """Add gradient to ``grad`` and Hessian to the band matrix ``ab``; returns the energy."""
+    """Add gradient to ``grad`` and Hessian to the band matrix ``ab``; returns the energy.
+
+    (Edited with ``stencils.scatter_band``: numba's cache keys a kernel on its own file only, so a kernel whose
+    helper in another file changed keeps the old helper compiled in until its own file changes.)"""
     g6 = np.empty(6)
     H6 = np.empty((6, 6))
     dofs = np.empty(6, dtype=np.int64)

@@ -30,9 +30,11 @@ def material_twist(q, vertex_edges, reference_twist, weld, v):
 
 
 @njit(cache=True)
-def _twist_local(q, ed, vertex_edges, reference_twist, weld, v, mbar, stiff, order, g8, H8, work):
+def _twist_local(q, ed, vertex_edges, reference_twist, weld, v, mbar, stiff, order, g8, H8, work, add=False):
     """Energy of vertex v; with order >= 1 its gradient in (e, f, theta_e, theta_f), order >= 2 the Hessian.
-    ``ed`` from ``geometry.edge_frames`` (only its tangents and lengths are used)."""
+    ``ed`` from ``geometry.edge_frames`` (only its tangents and lengths are used). With ``add`` the gradient and
+    Hessian are added to ``g8``, ``H8`` (another term's, e.g. the bending of the same vertex) instead of
+    overwriting them."""
     m = material_twist(q, vertex_edges, reference_twist, weld, v)
     r = m - mbar
     energy = 0.5 * stiff * r * r
@@ -49,12 +51,18 @@ def _twist_local(q, ed, vertex_edges, reference_twist, weld, v, mbar, stiff, ord
     dm[6] = -1.0
     dm[7] = 1.0
     for i in range(8):
-        g8[i] = stiff * r * dm[i]
+        if add:
+            g8[i] += stiff * r * dm[i]
+        else:
+            g8[i] = stiff * r * dm[i]
     if order == 1:
         return energy
     for i in range(8):
         for j in range(8):
-            H8[i, j] = stiff * dm[i] * dm[j]
+            if add:
+                H8[i, j] += stiff * dm[i] * dm[j]
+            else:
+                H8[i, j] = stiff * dm[i] * dm[j]
     s = stiff * r
     tt = vscale(1.0 / chi, vadd(te, tf))
     add_sym_outer(H8, 0, 0, -s / (4.0 * le * le), kb, vadd(te, tt))

@@ -63,6 +63,7 @@ def solve_implicit(system, state, options, progress=None, recorder=None):
     state.copy_from(start)
     second = _relax(system, state, options, options.dt0, progress, recorder, first.iterations, t_start)
     second.history = first.history + second.history
+    second.timings = {k: first.timings.get(k, 0.0) + v for k, v in second.timings.items()}
     second.message += (f" (after Newton's method from the start stalled at residual {first.residual:.2e} in "
                        f"{first.iterations} iterations and the solve restarted with dt0)")
     return second
@@ -87,13 +88,16 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     descent = total_descent = noise = 0.0
     potential = potential_best = 0.0     # E - work of the loads, from the start of this loop
     ab_K = np.empty_like(system.ab)
+    timings = {"assembly": 0.0, "factorisation": 0.0, "line_search": 0.0}   # seconds of wall_time by phase
     work = np.empty_like(system.ab)
     exact_contact = False        # contact: exact (unprojected) barrier Hessian in Newton's end game
     try:
         while True:
             for t in system.terms:
                 t.project = not exact_contact
+            t_phase = time.perf_counter()
             energy = evaluate_system(system, state, 2)
+            timings["assembly"] += time.perf_counter() - t_phase
             if system.terms and any([t.after_step(state) for t in system.terms]):
                 # contact: the adaptive barrier stiffness changed (docs/contact.md section 6); a new landscape
                 energy = evaluate_system(system, state, 2)
@@ -162,6 +166,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
             for _attempt in range(MAX_SHRINKS):
                 if _attempt == 12 and residual < 100.0 * residual_floor(system, state, scales):
                     break   # near the round-off floor a step that lowers the energy may not exist
+                t_phase = time.perf_counter()
                 work[:] = ab_K
                 add_diagonal(work, kl, ku, perm, diag, 1.0 / dt)
                 constrain_system(system, work, 1.0)     # T^T (K + D/dt) T: the end supports' free variables
@@ -171,6 +176,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                     delta, info = band_solve(work, kl, ku, perm, R)
                     system.linear_solves["band"] += 1
                 expand(system, delta)
+                timings["factorisation"] += time.perf_counter() - t_phase
                 with np.errstate(over="ignore", invalid="ignore"):   # a huge step is refused just below
                     slope = float(R @ delta)
                 if info != 0 or not np.all(np.isfinite(delta)) or slope <= 0:
@@ -187,6 +193,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                         dt = shrink(dt, options)
                         continue
                 a_start = a
+                t_phase = time.perf_counter()
                 for _ls in range(options.line_search_steps):
                     if transport(system, state, state.q + a * delta, trial):
                         e_trial = evaluate_system(system, trial, 0)
@@ -196,6 +203,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                             accepted = True
                             break
                     a *= 0.5
+                timings["line_search"] += time.perf_counter() - t_phase
                 if accepted or exact_contact:
                     break
                 dt = shrink(dt, options)
@@ -237,7 +245,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                                         "finite state kept")
     return final_result(system, state, status, residual=float(residual), iterations=it,
                         wall_time=time.perf_counter() - t_start, message=message, solver="implicit", strain=strain,
-                        history=history, dt=dt, residual_floor=float(floor))
+                        history=history, dt=dt, residual_floor=float(floor), timings=timings)
 
 
 # ---- contact (issue 14): the sparse path, taken only while a contact term reports off-band triplets ----

@@ -184,6 +184,8 @@ class SolveResult:
         force per pair and per length, minimal distance, per term); None otherwise.
     linear_solves : how many Newton systems the implicit solver factorised on the banded path and on the
         sparse (contact) path.
+    timings : seconds of ``wall_time`` by phase where the solver measures them (implicit: "assembly" -- forces,
+        band Jacobian, residual and its scales --, "factorisation" -- banded LU and solve --, "line_search").
 
     ``print(result)`` shows a short summary (``repr``); the arrays are attributes (``result.state``,
     ``result.eigenvalues``, ``result.history``).
@@ -229,6 +231,7 @@ class SolveResult:
     tol: float = float("nan")
     contact: dict | None = None         # contact diagnostics (issue 14; None for a scene without contact)
     linear_solves: dict = field(default_factory=dict)   # implicit: {"band": count, "sparse": count}
+    timings: dict = field(default_factory=dict)
 
     def __repr__(self):
         """One short paragraph: status, residual against tol, iterations, times, stability, message."""

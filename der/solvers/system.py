@@ -19,12 +19,13 @@ far below the tolerance in its last step; both are reported.
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from ..constraints import NO_LINKS, apply_targets, build_links, enforce_links
 from ..diagnostics import _edge_forces
 from ..energies.stretch import elongations
 from ..geometry import edge_frames, transport_frames
-from ..linalg import band_layout, band_matvec, condense_band, condense_vector, constrain_band, expand_step, new_band
+from ..linalg import band_layout, band_matvec, condense_band, condense_vector, constrain_band, dot, expand_step, new_band
 from ..loads import DistributedForce, EndForce, EndTorque, FollowerForce, PointForce, PointTorque, TwistingMoment
 from ..scene import COUNTER_NAMES, evaluate, make_plan
 
@@ -105,6 +106,28 @@ def row_norms(a):
     if m == 0.0 or not np.isfinite(m):
         return np.full(a.shape[0], m)
     return m * np.sqrt(((a / m) ** 2).sum(axis=1))
+
+
+@njit(cache=True)
+def max_row_norm(a):
+    """max over rows of ``row_norms(a)`` in one pass and no temporaries (the same operations, so the same
+    number: the load scale is recomputed at every Newton iteration)."""
+    m = 0.0
+    for i in range(a.shape[0]):
+        for k in range(a.shape[1]):
+            if np.isnan(a[i, k]):
+                return np.nan   # (max() would skip it)
+            m = max(m, abs(a[i, k]))
+    if m == 0.0 or not np.isfinite(m):
+        return m
+    best = 0.0
+    for i in range(a.shape[0]):
+        s = 0.0
+        for k in range(a.shape[1]):
+            x = a[i, k] / m
+            s += x * x
+        best = max(best, np.sqrt(s))
+    return m * best
 
 
 def applied_scales(scene):
@@ -242,7 +265,7 @@ def load_scales(system, state):
     F, M = _edge_forces(state.q, state.d1, state.reference_twist, state.lam, rod.edge_nodes, rod.vertex_nodes,
                         rod.vertex_edges, rod.l_bar, plan.k_stretch, plan.kappa_bar, rod.twist_bar, plan.weld,
                         rod.voronoi, rod.A1, rod.A2, plan.has_stretch, plan.has_bend, plan.has_twist)
-    f_int = float(row_norms(F).max()) if F.size else 0.0
+    f_int = float(max_row_norm(F)) if F.size else 0.0
     m_int = float(M.max()) if M.size else 0.0
     L = rod.length
     # internal forces no larger than their own round-off (rounding every coordinate by eps |x| moves a node
@@ -471,8 +494,8 @@ def multiplier_update(system, state, previous=None):
     g = elongations(state.q, rod.edge_nodes, rod.l_bar)
     k = system.plan.k_stretch
     if previous is not None:
-        gg = float(previous @ previous)
-        ratio = float(g @ previous) / gg if gg > 0 else 0.0
+        gg = dot(previous, previous)
+        ratio = dot(g, previous) / gg if gg > 0 else 0.0
         if ratio > 0.25 and k.max() * PENALTY_GROWTH <= PENALTY_MAX * system.k_initial.max():
             k *= PENALTY_GROWTH           # in place: the plan and the state see it
     state.lam += k * g

@@ -1,0 +1,153 @@
+"""Fast paths for large rods (issue 17) against the per-vertex reference construction they replace."""
+import numpy as np
+import pytest
+
+import der
+from der.energies.bend import material_curvatures
+from der.geometry import curvature_binormal, edge_frames, reference_twist_angle, tangents
+
+SHAPES = {
+    "helix": lambda: der.shapes.helix(1.0, 0.6, 3, 301),
+    "straight": lambda: der.shapes.straight(2.0, 57, axis=(1, 0, 0), director=(0, 0, 1)),
+    "ring": lambda: der.shapes.ring(1.0, 97),
+    "arc": lambda: der.shapes.arc(1.0, 3.0, 88),
+}
+
+
+@pytest.mark.parametrize("name", sorted(SHAPES))
+def test_rod_from_shape_equals_per_vertex_reference(name):
+    """rest twist, natural curvatures and tangents from the batch kernels are bitwise those of the per-vertex
+    kernels (the Python loops rod_from_shape used before)."""
+    rod = der.rod_from_shape(SHAPES[name](), 1.0, 1.5)
+    q, d1 = rod.rest_q, rod.rest_d1
+    t = np.array([(q[4 * b:4 * b + 3] - q[4 * a:4 * a + 3]) / np.linalg.norm(q[4 * b:4 * b + 3] - q[4 * a:4 * a + 3])
+                  for a, b in rod.edge_nodes])
+    assert np.array_equal(tangents(q, rod.edge_nodes), t)
+    twist = np.array([reference_twist_angle(t[a], d1[a], t[b], d1[b]) for a, b in rod.vertex_edges])
+    assert np.array_equal(rod.rest_twist, twist)
+    assert np.array_equal(rod.twist_bar, twist)
+    ed = edge_frames(q, rod.edge_nodes, d1)
+    weld = np.zeros(rod.n_vertices)
+    kb_edges = np.array([material_curvatures(ed, rod.vertex_edges, weld, v)
+                         for v in range(rod.n_vertices)]).reshape(-1, 2, 2)
+    assert np.array_equal(rod.kappa_bar_edges, kb_edges)
+    kb = np.array([curvature_binormal(t[a], t[b]) for a, b in rod.vertex_edges])
+    from der.geometry import curvature_binormals
+    assert np.array_equal(curvature_binormals(t, rod.vertex_edges), kb)
+
+
+def test_straight_director_parallel_to_an_edge_is_refused():
+    with pytest.raises(ValueError, match="director is parallel to edge"):
+        der.rod_from_shape(der.shapes.Shape(np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0.0]]), director=(1, 0, 0)), 1, 1)
+
+
+def test_max_row_norm_equals_row_norms():
+    from der.solvers.system import max_row_norm, row_norms
+
+    rng = np.random.default_rng(1)
+    for a in (rng.standard_normal((50, 3)), 1e200 * rng.standard_normal((7, 3)), np.zeros((4, 3)),
+              1e-300 * rng.standard_normal((5, 3))):
+        assert max_row_norm(a) == row_norms(a).max()
+    a = rng.standard_normal((5, 3))
+    a[2, 1] = np.nan
+    assert np.isnan(max_row_norm(a))
+    a[2, 1] = np.inf
+    assert max_row_norm(a) == np.inf
+
+
+def test_fused_bend_twist_assembly_equals_separate_terms():
+    """The fused vertex pass (bend + twist in one scatter) gives the matrix of bend_hessian + twist_hessian to
+    round-off, on an open rod and on a (folded) ring with a weld."""
+    from der.energies.bend import bend_hessian
+    from der.energies.twist import twist_hessian
+    from der.energies.vertex import bend_twist_hessian
+    from der.geometry import edge_frames
+    from der.linalg import band_layout, new_band
+    from der.scene import make_plan
+
+    rng = np.random.default_rng(2)
+    for rod in (der.rod_from_shape(der.shapes.helix(1.0, 0.6, 2, 40), 1.0, 1.5),
+                der.rod_from_shape(der.shapes.ring(1.0, 30), 1.0, 1.5).with_imposed_twist(0.7)):
+        state = rod.rest_state()
+        q = state.q + 1e-2 * rng.standard_normal(rod.n_dof)
+        plan = make_plan(der.Scene(rod), np.ones(rod.n_edges))
+        kl, ku, perm = band_layout(rod.n_nodes, rod.closed)
+        ed = edge_frames(q, rod.edge_nodes, state.d1)
+        g1, ab1 = np.zeros(rod.n_dof), new_band(rod.n_dof, kl, ku)
+        eb = bend_hessian(ed, plan.vertex_nodes, plan.vertex_edges, plan.weld, plan.kappa_bar, plan.voronoi,
+                          plan.A1, g1, ab1, kl, ku, perm)
+        et = twist_hessian(q, ed, plan.vertex_nodes, plan.vertex_edges, state.reference_twist, plan.weld,
+                           plan.twist_bar, plan.voronoi, plan.A2, g1, ab1, kl, ku, perm)
+        g2, ab2 = np.zeros(rod.n_dof), new_band(rod.n_dof, kl, ku)
+        eb2, et2 = bend_twist_hessian(q, ed, plan.vertex_nodes, plan.vertex_edges, state.reference_twist, plan.weld,
+                                      plan.kappa_bar, plan.twist_bar, plan.voronoi, plan.A1, plan.A2, g2, ab2, kl, ku,
+                                      perm)
+        assert eb2 == eb and et2 == et
+        assert np.abs(g2 - g1).max() <= 1e-13 * np.abs(g1).max()
+        assert np.abs(ab2 - ab1).max() <= 1e-13 * np.abs(ab1).max()
+        assert np.abs(ab1).max() > 0
+
+
+@pytest.mark.parametrize("closed", [False, True])
+def test_evaluate_equals_term_by_term_assembly(closed):
+    """scene.evaluate at order 2 (bending and twisting fused into one vertex pass, the band zeroed and scattered
+    column by column) against the term kernels called one after the other on a zeroed band: same energy,
+    gradient and Jacobian (with the frame-transport term) to round-off; on an open rod and a folded, welded
+    ring."""
+    from der.energies.bend import bend_hessian
+    from der.energies.stretch import stretch_hessian
+    from der.energies.twist import twist_hessian
+    from der.geometry import add_transport_jacobian, edge_frames
+    from der.linalg import band_layout, new_band
+    from der.scene import evaluate, make_plan
+
+    rng = np.random.default_rng(3)
+    if closed:
+        rod = der.rod_from_shape(der.shapes.ring(1.0, 31), 1.0, 1.5).with_imposed_twist(0.4)
+    else:
+        rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, 2, 45), 1.0, 1.5)
+    state = rod.rest_state()
+    q = state.q + 1e-2 * rng.standard_normal(rod.n_dof)
+    lam = 0.1 * rng.standard_normal(rod.n_edges)
+    k = 10.0 + rng.random(rod.n_edges)
+    plan = make_plan(der.Scene(rod), k)
+    kl, ku, perm = band_layout(rod.n_nodes, rod.closed)
+    g, f, ab = np.zeros(rod.n_dof), np.zeros(rod.n_dof), new_band(rod.n_dof, kl, ku)
+    ab[:] = np.nan   # every entry must be overwritten
+    energy = evaluate(plan, q, state.d1, state.reference_twist, lam, 2, g, f, ab, kl, ku, perm)
+    assert plan.counters[:4].tolist() == [1, 1, 1, 1]
+    g0, ab0 = np.zeros(rod.n_dof), new_band(rod.n_dof, kl, ku)
+    ed = edge_frames(q, rod.edge_nodes, state.d1)
+    e0 = stretch_hessian(q, plan.edge_nodes, plan.l_bar, plan.k_stretch, lam, g0, ab0, kl, ku, perm)
+    e0 += bend_hessian(ed, plan.vertex_nodes, plan.vertex_edges, plan.weld, plan.kappa_bar, plan.voronoi, plan.A1,
+                       g0, ab0, kl, ku, perm)
+    e0 += twist_hessian(q, ed, plan.vertex_nodes, plan.vertex_edges, state.reference_twist, plan.weld,
+                        plan.twist_bar, plan.voronoi, plan.A2, g0, ab0, kl, ku, perm)
+    add_transport_jacobian(q, rod.edge_nodes, g0[3::4][:rod.n_edges].copy(), ab0, kl, ku, perm)
+    assert abs(energy - e0) <= 1e-13 * abs(e0)
+    assert np.abs(g - g0).max() <= 1e-13 * np.abs(g0).max()
+    assert np.isfinite(ab).all()
+    assert np.abs(ab - ab0).max() <= 1e-13 * np.abs(ab0).max()
+    # and the order-1 gradient (term kernels) is the same gradient
+    g1 = np.zeros(rod.n_dof)
+    evaluate(plan, q, state.d1, state.reference_twist, lam, 1, g1, f, ab0, kl, ku, perm)
+    assert np.abs(g1 - g).max() <= 1e-13 * np.abs(g).max()
+
+
+def test_dot_equals_numpy_to_round_off():
+    from der.linalg import dot
+
+    rng = np.random.default_rng(4)
+    for n in (0, 1, 3, 4, 7, 1001):
+        a, b = rng.standard_normal(n), rng.standard_normal(n)
+        assert abs(dot(a, b) - float(a @ b)) <= 1e-14 * max(float(np.abs(a) @ np.abs(b)), 1e-300)
+
+
+def test_implicit_solve_reports_its_time_split():
+    rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, 1, 60), 1.0, 1.5)
+    scene = der.Scene(rod, loads=[der.end_force([0, 0, 1e-3])], constraints=[der.clamp("start")])
+    res = der.solve(scene, stability=False)
+    assert res.converged and res.iterations > 0
+    assert set(res.timings) == {"assembly", "factorisation", "line_search"}
+    assert all(v > 0 for v in res.timings.values())
+    assert sum(res.timings.values()) <= res.wall_time

@@ -9,6 +9,7 @@ step, where the planar state stops being stable -- an out-of-plane bifurcation b
 With ``--perturb EPS`` each step starts from the previous state bent out of plane by EPS a0, so that beyond
 that point the solver follows the ring out of the plane instead of holding the unstable planar state.
 
+    python scenarios/loop_twist.py --through-fold [--n 100] --json    (der.continuation through the fold)
     python scenarios/loop_twist.py [--A1 1] [--A2 1.4925] [--a0 1] [--mt 0.5] [--sweep K] [--perturb EPS]
 """
 import sys
@@ -32,6 +33,7 @@ PARAMETERS = [
     ("perturb", 0.0, float, "out-of-plane perturbation (fraction of a0) applied at the start of every step",
      Range(0.0, 0.5, open_hi=True)),
     ("locate", False, bool, "after the sweep, bisect on m_t between the last stable and first unstable step"),
+    ("through-fold", False, bool, "follow the planar branch through the fold by der.continuation (pseudo-arclength)"),
 ]
 
 
@@ -64,7 +66,30 @@ def observe(rod, result, mt, p):
     }
 
 
+def through_fold(p):
+    """The planar branch followed through its fold by pseudo-arclength continuation (der.continuation): alpha
+    passes pi/2, m_t turns back, and the branch beyond is reported unstable."""
+    rod = der.rod_from_shape(der.shapes.ring(p.a0, p.n), p.A1, p.A2, EA=getattr(p, "EA", None))
+    fold = cf.loop_fold(p.A1, p.a0)
+    branch = der.continuation(lambda mt: der.Scene(rod, loads=[der.twisting_moment(mt)]), 0.05 * fold,
+                              parameter="mt", bounds=(0.0, 1.5 * fold), ds=0.2, locate_tol=1e-9,
+                              summaries={"alpha": lambda scene, st: float(np.nanmean(dg.alpha(rod, st)))},
+                              stop=lambda r: r["alpha"] > 2.5, max_steps=100, tol=p.tol)
+    folds = [s for s in branch.special if s["kind"] == "fold"]
+    fold_mt = folds[0]["mt"] / fold if folds else None
+    return {"converged": bool(folds) and branch.status == "completed", "status": branch.status,
+            "message": branch.message, "fold_mt": fold_mt, "fold_alpha": folds[0]["alpha"] if folds else None,
+            "error": None if fold_mt is None else abs(fold_mt - 1.0),
+            "reference": "fold of Eq. 40 at m_t a0^2/A1 = 1 (alpha = pi/2); error O(1/n^2)",
+            "special": [{k: v for k, v in s.items() if k not in ("state", "tangent")} for s in branch.special],
+            "continuation_s": branch.wall_time,
+            "branch": [{"mt": r["mt"] / fold, "alpha": r["alpha"], "stable": r["stable"],
+                        "min_eigenvalue": r["min_eigenvalue"]} for r in branch.points]}
+
+
 def run(p, solver):
+    if getattr(p, "through_fold", False):
+        return through_fold(p)
     rod = der.rod_from_shape(der.shapes.ring(p.a0, p.n), p.A1, p.A2, EA=getattr(p, "EA", None))
     fold = cf.loop_fold(p.A1, p.a0)
     steps = np.linspace(p.mt / p.sweep, p.mt, p.sweep) if p.sweep else np.array([p.mt])
@@ -157,6 +182,8 @@ def _verdict(sweep, fold):
 
 
 def validate(p):
+    if getattr(p, "through_fold", False):
+        return
     if not p.sweep and abs(p.mt) > cf.loop_fold(p.A1, p.a0):
         raise ValueError(f"--mt = {p.mt} is past the fold A1/a0^2 = {cf.loop_fold(p.A1, p.a0):.6g}: no planar "
                          "equilibrium exists; use --sweep to continue up to and past it")

@@ -23,7 +23,7 @@ def load(name):
 
 def run(name, n, must_converge=True, **params):
     mod = load(name)
-    defaults = {p[0]: p[1] for p in mod.PARAMETERS}
+    defaults = {p[0].replace("-", "_"): p[1] for p in mod.PARAMETERS}   # as argparse names them
     defaults.update(params)
     p = argparse.Namespace(n=n, solver="implicit", tol=1e-8, rrd=None, max_iterations=None, json=True, **defaults)
     mod.run.validate(p)

@@ -22,6 +22,8 @@ import time
 class SweepResult:
     """The table of a sweep: one row per grid point, in grid order.
 
+    Attributes
+    ----------
     rows : list of dicts: the point's parameters, then what the function returned (a dict; a Branch is given
         as its ``to_dict()``; any other value as ``value``), then ``ok`` and ``error`` (the exception, as
         "Type: message", when the point failed; None otherwise).

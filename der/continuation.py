@@ -813,20 +813,10 @@ def _predicted(problem, state, p, t, sigma):
 
 
 def _jsonable(value):
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        v = float(value)
-        return v if math.isfinite(v) else None
-    return value
+    """JSON-ready copy of ``value`` (the scenario contract's conversion, der.cli)."""
+    from .cli import _jsonable as jsonable
+
+    return jsonable(value)
 
 
 __all__ = ["continuation", "Branch", "critical_eigenvector", "gauge_modes", "METHODS", "KINDS"]

@@ -14,7 +14,6 @@ import csv
 import io
 import itertools
 import json
-import math
 import sys
 import time
 
@@ -270,22 +269,10 @@ def _cell(v):
 
 
 def _jsonable(value):
-    import numpy as np
+    """JSON-ready copy of ``value`` (the scenario contract's conversion, der.cli; imported on use)."""
+    from .cli import _jsonable as jsonable
 
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        v = float(value)
-        return v if math.isfinite(v) else None
-    return value
+    return jsonable(value)
 
 
 __all__ = ["sweep", "SweepResult", "grid_points", "run_point"]

@@ -44,6 +44,7 @@ KINDS = ("fold", "bifurcation", "hopf")
 GAUGE_REGULARISATION = 1e-12   # times diag|K|, only when the rod has free rigid motions (they are projected out)
 GAUGE_TOL = 1e-6               # |K v| <= GAUGE_TOL |K| |v|: a rigid motion the stiffness annihilates
 DENSE_EIGENVECTOR_MAX_DOFS = 2400
+GAUGE_ANGLE_WEIGHT = 1e-8        # rigid motions are fitted on the node coordinates (Problem.gauge_coordinates)
 TANGENT_COS = 0.9              # a step whose tangent turns by more than acos(0.9) = 26 degrees is halved
 
 
@@ -54,8 +55,9 @@ class Branch:
     ----------
     parameter : the parameter's name (a column of the table).
     points : list of dicts, one per equilibrium on the branch: the parameter, ``s`` (arclength, dimensionless),
-        ``dp_ds``, the user's summaries, ``min_eigenvalue``, ``stable``, ``flutter``, ``residual``,
-        ``newton_iterations``.
+        ``dp_ds``, the user's summaries, ``residual``, ``newton_iterations`` (Newton steps and multiplier
+        updates of the corrector), ``min_eigenvalue``, ``stable``, ``flutter`` and ``stability_time`` (seconds
+        of the eigenvalue computation at that point).
     states : the RodState of each point (empty if ``keep_states=False``).
     special : list of dicts: the located special points, each with ``kind`` ("fold", "bifurcation" or "hopf"),
         the parameter, ``index`` (it lies between points index - 1 and index), ``s``, ``min_eigenvalue``,
@@ -418,8 +420,18 @@ class _Problem:
                 _expand(sys_, col)
                 x[:, k] = col
         if V.shape[1]:
-            x = x - V @ (V.T @ x)
+            x = x - V @ self.gauge_coordinates(V, x)
         return x
+
+    def gauge_coordinates(self, V, x):
+        """The rigid-motion coordinates c of ``x`` (n,) or (n, k), with V c its rigid part: fitted on the node
+        coordinates (angles weighted GAUGE_ANGLE_WEIGHT times less), so that a step that only turns cross-sections
+        -- a twist ramp, which an orthogonal projection would split into a tilt of the whole rod and a remainder --
+        keeps its nodes where they are. A rod whose cross-sections may all turn together (no natural curvature)
+        has that turn fitted on the angles."""
+        w = np.where(self.weights == 0, 0.0, np.where(np.arange(self.n) % 4 == 3, GAUGE_ANGLE_WEIGHT, 1.0))
+        VW = V.T * w
+        return np.linalg.solve(VW @ V, VW @ x)
 
     def tangent(self, p, state, t_prev):
         """The unit tangent at a converged point, oriented along ``t_prev``; None if K is singular."""
@@ -444,8 +456,11 @@ class _Problem:
 
         trial = state.copy()
         res_prev = math.inf
-        updates = 0
-        for it in range(max_newton + 1):
+        updates = newton = 0
+        # Newton's method on the bordered system; when it converges with the stretch above its tolerance, the
+        # inextensibility multipliers are updated (augmented Lagrangian, as der.solve) and Newton goes on from
+        # there with its own count and its own convergence test (an update raises the residual)
+        for it in range(max_newton + 31):
             R, res, strain_ok = self.residual(p, state)
             if not np.isfinite(res):
                 return None
@@ -456,9 +471,11 @@ class _Problem:
                     return None
                 multiplier_update(self.system(p), state)
                 updates += 1
+                newton, res_prev = 0, math.inf
                 continue
-            if it == max_newton or (it >= 3 and res > 0.5 * res_prev) or res > 1e3 * max(res_prev, 1e-3):
+            if newton == max_newton or (newton >= 3 and res > 0.5 * res_prev) or res > 1e3 * max(res_prev, 1e-3):
                 return None
+            newton += 1
             res_prev = res
             fac = self.factor(p, state)
             if fac is None:
@@ -590,7 +607,9 @@ def _point(problem, settings, state, p, s, dp_ds, residual, iterations):
     row["residual"] = float(residual)
     row["newton_iterations"] = int(iterations)
     if settings["stability"]:
+        t0 = time.perf_counter()
         st = check_stability(scene, state, settings["n_eigenvalues"])
+        row["stability_time"] = time.perf_counter() - t0
         row["min_eigenvalue"] = float(st.min_eigenvalue)
         row["stable"] = bool(st.stable)
         row["flutter"] = bool(st.flutter)

@@ -346,7 +346,9 @@ class _Problem:
         """A copy of ``state`` with scene_of(p)'s constraint targets applied (frames transported)."""
         from .solvers.system import prepare_state
 
-        return prepare_state(self.system(p), state)
+        sys_ = self.system(p)
+        carry_penalty(sys_, state)
+        return prepare_state(sys_, state)
 
     def inner(self, u, v):
         return float(np.sum(self.weights * u[:-1] * v[:-1]) + self.w_p * u[-1] * v[-1])
@@ -355,17 +357,22 @@ class _Problem:
         return math.sqrt(self.inner(u, u))
 
     def residual(self, p, state):
-        """(R, residual norm, strain ok) at ``state`` for scene_of(p) (evaluates the system)."""
+        """(R, residual norm, strain ok, the elongation as a residual) at ``state`` for scene_of(p) (evaluates
+        the system)."""
         from .solvers.system import (
-            evaluate_system, load_scales, max_strain, residual_norm, residual_vector,
+            constraint_residual, evaluate_system, load_scales, max_strain, residual_norm, residual_vector,
         )
 
         sys_ = self.system(p)
+        carry_penalty(sys_, state)
         evaluate_system(sys_, state, 1)
         R = residual_vector(sys_)
-        res = residual_norm(sys_, R, load_scales(sys_, state))
-        strain_ok = (max_strain(sys_, state) <= self.options.effective_strain_tol) if sys_.rod.inextensible else True
-        return R, res, strain_ok
+        scales = load_scales(sys_, state)
+        res = residual_norm(sys_, R, scales)
+        if not sys_.rod.inextensible:
+            return R, res, True, 0.0
+        strain_ok = max_strain(sys_, state) <= self.options.effective_strain_tol
+        return R, res, strain_ok, constraint_residual(sys_, state, scales)
 
     def dR_dp(self, p, state):
         """(dR/dp at fixed free DOFs, dq_fixed/dp): central differences; the constraint targets move with p."""
@@ -440,8 +447,9 @@ class _Problem:
             return None
         Rp, dqf = self.dR_dp(p, state)
         b = self.solve(fac, Rp)
-        fixed = fac[2].fixed
-        b[fixed] = dqf[fixed]
+        held, dep = held_dofs(fac[2])
+        b[held] = dqf[held]
+        b[dep] += dqf[dep]
         # (K b = R_p: t = (b, 1) tp with <t_prev, t> = 1 fixing length and orientation)
         t = np.append(b, 1.0)
         tp = 1.0 / self.inner(t_prev, t) if self.inner(t_prev, t) != 0 else 1.0
@@ -457,22 +465,25 @@ class _Problem:
         trial = state.copy()
         res_prev = math.inf
         updates = newton = 0
-        # Newton's method on the bordered system; when it converges with the stretch above its tolerance, the
-        # inextensibility multipliers are updated (augmented Lagrangian, as der.solve) and Newton goes on from
-        # there with its own count and its own convergence test (an update raises the residual)
-        for it in range(max_newton + 31):
-            R, res, strain_ok = self.residual(p, state)
+        last_g, just_updated = None, False
+        # Newton's method on the bordered system. An inextensible rod's multipliers are updated as der.solve does
+        # (augmented Lagrangian: near equilibrium, when the stretch is above its tolerance; the penalty grows
+        # where the update does not shrink it), and Newton goes on from there with its own count and its own
+        # convergence test (an update raises the residual)
+        for it in range(max_newton + 61):
+            R, res, strain_ok, constraint_res = self.residual(p, state)
             if not np.isfinite(res):
                 return None
-            if res <= self.tol:
-                if strain_ok:
-                    return state, p, res, it
+            if res <= self.tol and strain_ok:
+                return state, p, res, it
+            if not strain_ok and not just_updated and res <= max(self.tol, 0.1 * constraint_res):
                 if updates >= 30:
                     return None
-                multiplier_update(self.system(p), state)
+                last_g = multiplier_update(self.system(p), state, last_g if res < 1e-4 else None)
                 updates += 1
-                newton, res_prev = 0, math.inf
+                newton, res_prev, just_updated = 0, math.inf, True
                 continue
+            just_updated = False
             if newton == max_newton or (newton >= 3 and res > 0.5 * res_prev) or res > 1e3 * max(res_prev, 1e-3):
                 return None
             newton += 1
@@ -487,8 +498,10 @@ class _Problem:
                 Rp, dqf = self.dR_dp(p, state)
                 ab = self.solve(fac, np.stack([R, Rp], axis=1))
                 a, b = ab[:, 0], ab[:, 1]
-                a[sys_.fixed] = 0.0
-                b[sys_.fixed] = dqf[sys_.fixed]
+                held, dep = held_dofs(sys_)
+                a[held] = 0.0
+                b[held] = dqf[held]
+                b[dep] += dqf[dep]
                 x = np.append(state.q, p)
                 N = self.inner(t, x - x_pred)
                 denom = float(np.sum(self.weights * t[:-1] * b)) + self.w_p * t[-1]
@@ -498,13 +511,38 @@ class _Problem:
                 dq = a + dp * b
             if not np.all(np.isfinite(dq)):
                 return None
+            if not fixed_p:
+                # held DOFs go where scene_of(p_new)'s targets put them (prepared, below), not along the linear
+                # step: a clamp keeps its end edge's length, and a linear turn of it would stretch it for good
+                dq[held] = 0.0
             p_new = p + dp
+            trial.penalty = None if state.penalty is None else state.penalty.copy()
             if not transport(sys_, state, state.q + dq, trial):
                 return None
             state = self.prepared(p_new, trial)
             state.lam[:] = trial.lam
             p = p_new
         return None
+
+
+def held_dofs(system):
+    """(held, dependent): boolean masks of the DOFs the constraints hold outright, and of those an end support
+    moves with its free variables (q_dep = c(p) + T y; system.fixed has both). A step's dependent entries are
+    T times its free ones (Problem.solve expands them) plus, along the parameter, dc/dp."""
+    dep = np.zeros(system.rod.n_dof, dtype=bool)
+    lk = getattr(system, "links", None)
+    if lk is not None and lk.tri_dep.size:
+        dep[lk.tri_dep] = True
+    return system.fixed & ~dep, dep
+
+
+def carry_penalty(system, state):
+    """Set ``system``'s stretch penalty to the one ``state`` was last updated with (state.penalty; the start
+    value if none): the continuation builds one system per parameter value, and a penalty grown by the multiplier
+    updates (der.solvers.system.multiplier_update) must not fall back to its start value at the next p."""
+    if system.rod.inextensible:
+        # the energy must use the penalty the multipliers were updated with, or the update over- or undershoots
+        system.plan.k_stretch[:] = system.k_initial if state.penalty is None else state.penalty
 
 
 def _expand(system, x):
@@ -735,7 +773,7 @@ def _step(problem, settings, state, p, t, x_pred, natural, landing, branch):
     p_new = float(x_pred[-1])
     if natural:
         pred = state.copy()
-        if not transport(problem.system(p), state, x_pred[:-1], pred):
+        if not transport(problem.system(p), state, _free_part(problem, p, state, x_pred[:-1]), pred):
             return None
         result = solve(problem.scene(p_new), state=pred, options=settings["options"], tol=settings["tol"],
                        stability=False, raise_on_failure=False)
@@ -743,7 +781,7 @@ def _step(problem, settings, state, p, t, x_pred, natural, landing, branch):
             return None
         return problem.prepared(p_new, result.state), p_new, result.residual, result.iterations
     pred = state.copy()
-    if not transport(problem.system(p), state, x_pred[:-1], pred):
+    if not transport(problem.system(p), state, _free_part(problem, p, state, x_pred[:-1]), pred):
         return None
     pred = problem.prepared(p_new, pred)
     pred.lam[:] = state.lam
@@ -825,10 +863,19 @@ def _predicted(problem, state, p, t, sigma):
     from .solvers.system import transport
 
     pred = state.copy()
-    transport(problem.system(p), state, state.q + sigma * t[:-1], pred)
+    transport(problem.system(p), state, _free_part(problem, p, state, state.q + sigma * t[:-1]), pred)
     pred = problem.prepared(p + sigma * t[-1], pred)
     pred.lam[:] = state.lam
     return pred
+
+
+def _free_part(problem, p, state, q):
+    """``q`` with the held DOFs put back to ``state``'s (scene_of's targets move them when the predicted state is
+    prepared: see Problem.correct)."""
+    held, _ = held_dofs(problem.system(p))
+    q = q.copy()
+    q[held] = state.q[held]
+    return q
 
 
 def _jsonable(value):

@@ -25,6 +25,15 @@ eigenvalue is complex). Both are located by a secant (Illinois) search on the ar
 of dp/ds for a fold, of the lowest eigenvalue for a bifurcation. ``Branch.switch`` starts the bifurcated
 branch along the critical eigenvector.
 
+Contact: while contact pairs are active the stiffness couples distant DOFs; each Newton step then factorises
+the constrained band plus the contact Hessian's triplets as one sparse matrix (SuperLU, as the implicit solver
+does), and K a = R, K b = R_p are solved with it (``Branch.sparse_factorisations`` counts them). The barrier
+keeps the strands apart as long as no Newton step jumps across it; a step that would (a non-finite energy)
+fails and is halved. Not handled: active contact on a rod whose end supports link DOFs (sliding clamps, pins).
+
+Held DOFs (clamps, prescribed rotations) are put where scene_of(p)'s targets put them at every iterate, never
+extrapolated along a linear step: a clamp keeps its end edge's length, which a linear turn would stretch.
+
 ``method="natural"`` is the simpler natural-parameter continuation: p steps, each point a ``der.solve`` warm
 started from a secant predictor. It stops at a fold.
 """
@@ -65,7 +74,8 @@ class Branch:
     status : "completed" (reached a bound or the stop condition), "max_steps", "time_budget", "step_too_small"
         (the corrector failed down to ``ds_min``: a turning point the natural method cannot pass, or no
         equilibrium nearby), "interrupted"; message : why, in words.
-    wall_time : seconds.
+    wall_time : seconds. sparse_factorisations : how many bordered Newton steps factorised the sparse K of an
+    active contact (band + contact Hessian, SuperLU) instead of the band.
 
     ``table()`` gives the columns, ``to_csv``/``to_json`` write them, ``plot`` a PNG bifurcation diagram,
     ``record`` a rerun recording of the path, ``switch`` the branch that bifurcates at a special point.
@@ -75,6 +85,7 @@ class Branch:
         self.parameter = parameter
         self.points, self.states, self.special = [], [], []
         self.status, self.message, self.wall_time = "", "", 0.0
+        self.sparse_factorisations = 0
         self._settings = settings
 
     def __repr__(self):
@@ -312,6 +323,7 @@ class _Problem:
         self._systems = {}
         self.n = None
         self.weights = None
+        self.sparse_factorisations = 0
 
     def scene(self, p):
         scene = self.scene_of(float(p))
@@ -397,9 +409,7 @@ class _Problem:
 
         sys_ = self.system(p)
         evaluate_system(sys_, state, 2)
-        if getattr(sys_, "contact_coo", None):
-            raise ValueError("der.continuation: contact is active at this point (off-band stiffness); the bordered "
-                             "banded Newton of the continuation does not handle contact yet")
+        coo = getattr(sys_, "contact_coo", None)
         V = gauge_modes(sys_, state)
         ab = sys_.ab.copy(order="F")
         if V.shape[1]:
@@ -407,18 +417,52 @@ class _Problem:
             diag[diag == 0] = 1.0
             add_diagonal(ab, sys_.kl, sys_.ku, sys_.perm, diag, GAUGE_REGULARISATION)
         constrain_system(sys_, ab, 1.0)        # T^T K T on the end supports' free variables, held DOFs identity
+        if coo:
+            return self._sparse_factor(sys_, ab, coo, V)
         lu, piv, info = dgbtrf(ab, sys_.kl, sys_.ku, overwrite_ab=1)
         return (lu, piv, sys_, V) if info == 0 else None
+
+    def _sparse_factor(self, sys_, ab, coo, V):
+        """Active contact couples distant DOFs: the constrained band plus the contact Hessian's triplets (off the
+        held DOFs) as one sparse matrix, factorised by SuperLU (as the implicit solver does while pairs are
+        active). Returns ("sparse", lu, system, gauge basis) or None if it is singular."""
+        import scipy.sparse as sp
+        from scipy.sparse.linalg import splu
+
+        from .linalg import band_to_coo
+
+        if sys_.links.tri_dep.size:
+            raise ValueError("der.continuation: contact is active on a rod whose end supports link DOFs (a sliding "
+                             "clamp or a pin): the continuation's sparse path does not condense those; use "
+                             "method='natural' (each point a der.solve)")
+        n = ab.shape[1]
+        rb, cb, vb = band_to_coo(ab, sys_.kl, sys_.ku, sys_.perm)
+        rows, cols, vals = [rb], [cb], [vb]
+        for r, c, v in coo:
+            keep = ~(sys_.fixed[r] | sys_.fixed[c])
+            rows.append(r[keep])
+            cols.append(c[keep])
+            vals.append(v[keep])
+        A = sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+        try:
+            lu = splu(A, permc_spec="COLAMD")
+        except RuntimeError:           # exactly singular
+            return None
+        self.sparse_factorisations += 1
+        return ("sparse", lu, sys_, V)
 
     def solve(self, fac, rhs):
         """K^-1 rhs (rhs (n,) or (n, k)), rigid motions projected out."""
         from scipy.linalg.lapack import dgbtrs
 
         lu, piv, sys_, V = fac
-        b = np.empty_like(rhs)
-        b[sys_.perm] = rhs
-        x, info = dgbtrs(lu, sys_.kl, sys_.ku, b.reshape(len(b), -1), piv)
-        x = x.reshape(b.shape)[sys_.perm]
+        if isinstance(lu, str):                    # the sparse factorisation (active contact)
+            x = piv.solve(np.ascontiguousarray(rhs))
+        else:
+            b = np.empty_like(rhs)
+            b[sys_.perm] = rhs
+            x, info = dgbtrs(lu, sys_.kl, sys_.ku, b.reshape(len(b), -1), piv)
+            x = x.reshape(b.shape)[sys_.perm]
         if x.ndim == 1:
             _expand(sys_, x)
         else:
@@ -753,6 +797,7 @@ def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_re
         branch.states = []
     branch.status, branch.message = status, message
     branch.wall_time = time.perf_counter() - t_start
+    branch.sparse_factorisations = problem.sparse_factorisations
     return branch
 
 

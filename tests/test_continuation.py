@@ -174,6 +174,39 @@ def test_michell_threshold_located_and_the_writhing_branch_followed():
     assert check.iterations <= 1 and np.abs(check.state.q - last.q).max() < 1e-6
 
 
+def test_continuation_through_self_contact_uses_the_sparse_factorisation():
+    """Past Michell's threshold the naturally straight ring (n = 40, rod radius 0.05) writhes into self-contact;
+    from there der.continuation follows it in the imposed twist with contact pairs active: the bordered Newton
+    factorises band + contact Hessian sparsely, Lk = Tw + Wr stays twist / 2 pi, and every point is an
+    equilibrium by der.solve's measure with its strands at least 2r apart."""
+    n, r = 40, 0.05
+    rod, _ = michell_ring(n)
+    twist = 2.0 * cf.michell_twist(1.0, 1.5)
+
+    def scene_of(tw):
+        return der.Scene(rod.with_imposed_twist(tw), contacts=[der.self_contact(r)])
+
+    welded = rod.with_imposed_twist(twist)
+    x0 = welded.rest_q.reshape(-1, 4)[:, :3]
+    phi = np.arctan2(x0[:, 1], x0[:, 0])
+    kick = np.zeros_like(x0)
+    kick[:, 2] = 0.005 * (np.cos(2 * phi) + np.sin(3 * phi))
+    start = der.solve(scene_of(twist), state=welded.displaced(welded.rest_state(), kick, twist * np.arange(n) / n),
+                      stability=False)
+    assert start.contact["n_contacts"] > 0 and writhe(scene_of(twist), start.state) > 1.0
+    branch = der.continuation(scene_of, twist, twist + 1.0, state=start.state, parameter="twist", ds=0.2,
+                              max_steps=3, locate=False, summaries={"writhe": writhe, "lk_error": lk_error})
+    assert len(branch.points) == 4, branch.message
+    assert branch.sparse_factorisations > 0
+    tw = np.array([p["twist"] for p in branch.points])
+    assert np.all(np.diff(tw) > 0)
+    assert all(p["lk_error"] < 1e-9 and p["residual"] <= 1e-8 for p in branch.points)
+    for p, state in zip(branch.points[1:], branch.states[1:]):
+        check = der.solve(scene_of(p["twist"]), state=state, stability=False)
+        assert check.iterations <= 1 and np.abs(check.state.q - state.q).max() < 1e-6
+        assert check.contact["n_contacts"] > 0 and check.contact["min_distance"] >= 2 * r
+
+
 def test_natural_continuation_stops_at_the_fold():
     branch = der.continuation(loop(12, 1.0), 0.8, 1.2, method="natural", parameter="mt", ds=0.1, ds_min=1e-3,
                               stability=False)

@@ -87,6 +87,8 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
         options = SolverOptions(**overrides)
     elif overrides:
         options = dataclasses.replace(options, **overrides)
+    if scene.scenes is not None:
+        return _solve_several(scene, state, solver, options, record, raise_on_failure)
     rod = scene.rod
     if state is None:
         state = rod.rest_state()
@@ -159,6 +161,98 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
     if not result.converged and raise_on_failure:
         raise ConvergenceError(result)
     return result
+
+
+def _solve_several(scene, state, solver, options, record, raise_on_failure):
+    """``solve`` for a scene of several rods (der/solvers/multi.py); ``state`` None or one RodState per rod."""
+    from ..rod import check_state
+    from .multi import MultiState, build_multi_system, prepare_multi_state
+
+    rods = scene.rods
+    if state is None:
+        states = [r.rest_state() for r in rods]
+    else:
+        states = list(state.rods) if isinstance(state, MultiState) else state
+        if not isinstance(states, (list, tuple)) or len(states) != len(rods):
+            raise ValueError(f"der.solve: state must be None, a MultiState or a list of {len(rods)} RodStates (one "
+                             f"per rod of the scene); got {type(state).__name__}")
+        for i, (r, s) in enumerate(zip(rods, states)):
+            check_state(r, s, f"der.solve: state of rod {i}")
+            if not (np.isfinite(s.q).all() and np.isfinite(s.d1).all() and np.isfinite(s.reference_twist).all()):
+                raise ValueError(f"der.solve: the starting state of rod {i} must be finite")
+    if record is not None and isinstance(record, (str, os.PathLike)):
+        check_record_path(record, "der.solve: record")
+    if solver != "implicit":
+        raise ValueError("der.solve: a scene of several rods needs the implicit solver (solver='implicit'); the "
+                         "explicit solver takes one rod")
+    compile_time = _compile_first()
+    if scene.contacts:
+        from ..terms import warmup as _contact_warmup
+
+        compile_time += _contact_warmup()
+    system = build_multi_system(scene, options)
+    work = prepare_multi_state(system, MultiState(states))
+    if not system.terms:
+        for i, (p, s) in enumerate(system.views(work)):
+            try:
+                check_equilibrium_exists(p, s)
+            except ValueError as exc:
+                raise ValueError(f"rod {i}: {exc}") from None
+    for term in system.terms:
+        term.check_start(work)
+    for term in system.terms:
+        term.start_stiffness(work, system)
+    recorder = None
+    if record is not None:
+        from ..recording import MultiRecorder, Recorder
+
+        recorder = record if isinstance(record, Recorder) else MultiRecorder(record, rods, scene=scene)
+        recorder.log_rest()
+    progress = Progress(solver, options.progress)
+    try:
+        from .implicit import solve_implicit
+
+        result = solve_implicit(system, work, options, progress, recorder)
+        if result.status == "converged_at_floor":
+            warnings.warn(f"{solver} solve: {result.message}", RoundoffFloorWarning, stacklevel=3)
+        if result.converged and options.stability:
+            _stability_several(system, result, options.n_eigenvalues)
+        result.compile_time = compile_time
+        result.tol = options.tol
+        result.linear_solves = dict(system.linear_solves)
+        if system.terms:
+            from ..diagnostics import contact_forces
+
+            result.contact = contact_forces(system, result.state)
+        if recorder is not None:
+            recorder.log_final(result)
+    finally:
+        if recorder is not None and recorder is not record:
+            recorder.close()
+    if not result.converged and raise_on_failure:
+        raise ConvergenceError(result)
+    return result
+
+
+def _stability_several(system, result, n_eigenvalues):
+    """Stability of a scene of several rods: without a coupling term each rod's own (``result.rods[i]``
+    gets ``stable`` and ``min_eigenvalue``; the scene is stable if every rod is); with contact terms it is not
+    computed (the barrier couples the rods) and says so."""
+    from .stability import stability
+
+    if system.terms:
+        result.stability_note = "not computed for a scene of several rods with contact terms"
+        return
+    stable, lowest = True, np.inf
+    for i, (p, s) in enumerate(system.views(result.state)):
+        one = SolveResult(state=s, converged=True, status="", residual=float("nan"), iterations=0, wall_time=0.0,
+                          message="")
+        stability(p, one, n_eigenvalues)
+        result.rods[i].update(stable=one.stable, min_eigenvalue=one.min_eigenvalue)
+        stable = stable and bool(one.stable)
+        lowest = min(lowest, one.min_eigenvalue)
+    result.stable, result.min_eigenvalue = stable, lowest
+    result.stability_note = "each rod's own stability (no coupling term)"
 
 
 def _compile_first():

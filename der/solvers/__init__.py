@@ -99,9 +99,11 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
         raise ValueError(f"the starting state must be finite (entry {bad} of q is {state.q[bad] if bad >= 0 else '?'})")
     if record is not None and isinstance(record, (str, os.PathLike)):
         check_record_path(record, "der.solve: record")
-    if scene.contacts and solver != "implicit":
-        raise ValueError("der.solve: contact terms need the implicit solver (solver='implicit'); the explicit "
-                         "solver has no CCD-limited step yet")
+    if scene.contacts and solver != "implicit" and not (
+            len(scene.contacts) == 1 and getattr(scene.contacts[0], "explicit_ok", False)):
+        raise ValueError("der.solve: the explicit solver handles one self-contact term (der.self_contact, or "
+                         "der.rod_contact on one rod); obstacles and several contact terms need the implicit solver "
+                         "(solver='implicit')")
     compile_time = _compile_first()
     if scene.contacts:
         from ..terms import warmup as _contact_warmup

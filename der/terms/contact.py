@@ -67,6 +67,7 @@ class SelfContact:
     dhat: float | None = None
     kappa: float | None = None
     constructor = "self_contact(radius)"
+    explicit_ok = True          # the explicit solver handles it (der/solvers/explicit_contact.py)
 
     def check_scene(self, scene):
         curvature_radius_check(scene.rod, None, self.radius, "der.self_contact")
@@ -304,6 +305,7 @@ class RodContact:
     kappa: float | None = None
     within: bool = True
     constructor = "rod_contact(radius)"
+    explicit_ok = True          # on one rod (a scene of several rods needs the implicit solver)
 
     def radii(self, n_rods):
         """One radius per rod."""

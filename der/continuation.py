@@ -284,6 +284,9 @@ def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=
                     max_newton=max_newton, keep_states=bool(keep_states), progress=progress, options=options)
     problem = _Problem(settings)
     scene = problem.scene(p0)
+    if getattr(scene, "scenes", None) is not None:
+        raise ValueError("der.continuation: scene_of returned a scene of several rods; the continuation follows one "
+                         "rod (continue each rod alone, or step der.solve along the parameter)")
     if state is not None:
         from .rod import check_state
 

@@ -140,3 +140,50 @@ def test_bad_input_is_refused_before_any_work():
         der.solve(overlap)
     with pytest.raises(ValueError, match="one per rod"):
         der.solve(der.Scene([a, b]), state=a.rest_state())
+
+
+def test_a_ring_and_an_inextensible_rod_solve_as_each_alone():
+    """Different band layouts side by side (a ring's interleaved band, half-bandwidth 19, and an open rod's, 10)
+    and an inextensible rod's multiplier updates inside a scene of several rods."""
+    ring = der.rod_from_shape(der.shapes.ring(1.0, 40), A1=1.0, A2=1.5)
+    sr = der.Scene(ring, loads=[der.point_force(10, [0, 0.3, 0]), der.point_force(30, [0, -0.3, 0])],
+                   constraints=[der.pin(0), der.pin(20)])
+    rod = der.rod_from_shape(der.shapes.straight(1.0, 30), A1=1.0, A2=1.5)       # inextensible
+    sb = der.Scene(rod, loads=[der.end_force([0.5, 0, 0])], constraints=[der.clamp("start")])
+    alone = [der.solve(sb, tol=1e-10), der.solve(sr, tol=1e-10)]
+    both = der.solve(der.Scene([sb, sr]), tol=1e-10)
+    assert both.converged and both.linear_solves["sparse"] == 0
+    for one, state in zip(alone, both.states):
+        assert np.abs(state.q - one.state.q).max() <= 1e-9 * np.abs(one.state.q).max()
+    assert both.strain <= 1e-8
+
+
+def test_two_rods_pressed_onto_a_floor_carry_their_loads_through_it():
+    """An obstacle in a scene of several rods acts on every rod (its radius from der.rod_contact)."""
+    r, F = 0.02, (0.5, 0.2)
+    scenes = []
+    for i, f in enumerate(F):
+        x = der.shapes.straight(1.0, 20).positions + [0.3 * i, 0.0, 0.0]
+        rod = der.rod_from_shape(der.shapes.Shape(x, False, [1, 0, 0]), A1=1.0, A2=1.5)
+        scenes.append(der.Scene(rod, loads=[der.end_force([0, 0, -f])], constraints=[der.clamp("end", slide=2)]))
+    zb = scenes[0].rod.rest_state().positions[0, 2]
+    floor = der.plane([0, 0, zb - r - 0.5 * r], [0, 0, 1])
+    res = der.solve(der.Scene(scenes, contacts=[der.rod_contact(r), floor]), tol=1e-10)
+    assert res.converged
+    plane = [t for t in res.contact["terms"] if t["kind"] == "plane"][0]
+    assert plane["total_force"] == pytest.approx(sum(F), rel=1e-8)
+    assert {e for e in plane["elements"]} <= {0, scenes[0].rod.n_nodes}      # the two bottom nodes
+    assert len(plane["elements"]) == 2
+
+
+def test_contact_diagnostics_of_a_scene_of_several_rods_and_refusals():
+    scene = _crossed_scene()
+    res = der.solve(scene, tol=1e-9)
+    again = der.diagnostics.contact_forces(scene, res.states)
+    # the same pairs and distance (the forces use the term's start stiffness, not the adapted one)
+    assert sorted(again["terms"][0]["pairs"]) == sorted(res.contact["terms"][0]["pairs"])
+    assert again["min_distance"] == pytest.approx(res.contact["min_distance"], rel=1e-12)
+    with pytest.raises(ValueError, match="several rods"):
+        der.check_stability(scene, res.state)
+    with pytest.raises(ValueError, match="several rods"):
+        der.continuation(lambda p: scene, 0.0, 1.0)

@@ -309,6 +309,9 @@ def check_stability(scene, state, n_eigenvalues=6):
     from ..rod import check_state
     from .stability import stability
 
+    if scene.scenes is not None:
+        raise ValueError("der.check_stability: a scene of several rods; check each rod's scene with its state "
+                         "(der.solve reports each rod's stability in result.rods when no contact couples them)")
     check_state(scene.rod, state, "der.check_stability")
     system = build_system(scene, SolverOptions())
     work = prepare_state(system, state)

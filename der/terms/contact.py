@@ -359,12 +359,20 @@ def rod_contact(radius, dhat=None, kappa=None, within=True):
 
     Example
     -------
+    Two crossed rods (A along x, clamped at both ends; B along y above it, in sleeves along z, pushed down):
+
     >>> import der
-    >>> a = der.rod_from_shape(der.shapes.straight(1.0, 20, axis=[1, 0, 0]), A1=1.0, A2=1.5)
-    >>> b = der.rod_from_shape(der.shapes.Shape(der.shapes.straight(1.0, 20, axis=[0, 1, 0]).positions
-    ...                                         + [0.5, -0.5, 0.05], director=[0, 0, 1]), A1=1.0, A2=1.5)
+    >>> a = der.rod_from_shape(der.shapes.straight(1.0, 20, axis=[1, 0, 0], director=[0, 0, 1]), A1=1.0, A2=1.5,
+    ...                        EA=1e3)
+    >>> x_b = der.shapes.straight(1.0, 21, axis=[0, 1, 0], director=[0, 0, 1]).positions + [0.5, -0.5, 0.1]
+    >>> b = der.rod_from_shape(der.shapes.Shape(x_b, director=[0, 0, 1]), A1=1.0, A2=1.5, EA=1e3)
     >>> scene = der.Scene([der.Scene(a, constraints=[der.clamp("start"), der.clamp("end")]),
-    ...                    der.Scene(b, constraints=[der.clamp("start")])], contacts=[der.rod_contact(0.02)])
+    ...                    der.Scene(b, loads=[der.distributed_force([0, 0, -0.5])],
+    ...                              constraints=[der.clamp("start", slide=2), der.clamp("end", slide=2)])],
+    ...                   contacts=[der.rod_contact(0.02)])
+    >>> result = der.solve(scene)
+    >>> round(float(sum(r["force"][2] for r in result.rods[0]["reactions"])), 6)   # A's clamps carry the push
+    0.5
     """
     if isinstance(radius, (list, tuple, np.ndarray)):
         radius = tuple(positive_radius(r, f"der.rod_contact: radius[{i}]") for i, r in enumerate(radius))

@@ -109,6 +109,10 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
         from ..terms import warmup as _contact_warmup
 
         compile_time += _contact_warmup()
+        if solver == "explicit":
+            from .explicit_contact import warmup as _explicit_contact_warmup
+
+            compile_time += _explicit_contact_warmup()
     system = build_system(scene, options)     # refuses loads whose scale is not a finite double
     work = prepare_state(system, state)
     if not system.terms:                      # (a contact can react to a net load)

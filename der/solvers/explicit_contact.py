@@ -297,3 +297,30 @@ class ContactRun:
         if status == STATUS_REBUILD:
             status = STATUS_RUNNING
         return status, done_total, residual, dt, alpha, n_pos, e_total, work_done, rejected_total, dt_max
+
+
+_WARM = []
+
+
+def warmup():
+    """Compile (or load from numba's cache) the explicit solver's contact kernels once per process: a few FIRE
+    steps of a small twisted ring with self-contact, so that a solve's wall time holds no compilation. Returns
+    the seconds it took (0 afterwards)."""
+    if _WARM:
+        return 0.0
+    import time
+
+    from .. import rod as _rod
+    from .. import shapes
+    from ..scene import Scene
+    from ..terms.contact import self_contact
+    from . import solve
+
+    _WARM.append(0.0)              # (the solve below calls this again)
+    t0 = time.perf_counter()
+    base = _rod.rod_from_shape(shapes.ring(1.0, 24), 1.0, 1.5)
+    ring = base.with_natural(kappa_bar=base.kappa_bar * 0.0)
+    solve(Scene(ring, contacts=[self_contact(0.02)]), solver="explicit", max_steps=20, stability=False,
+          raise_on_failure=False)
+    _WARM[0] = time.perf_counter() - t0
+    return _WARM[0]

@@ -22,7 +22,7 @@ from .loads import (
 )
 from .rod import Rod, RodState, rod_from_shape
 from .scene import Scene
-from .terms.contact import self_contact
+from .terms.contact import rod_contact, self_contact
 from .terms.obstacles import cylinder, plane, sphere
 from .solvers import (
     ConvergenceError, LockedRodWarning, RoundoffFloorWarning, SolveResult, SolverOptions, check_stability, solve,
@@ -35,6 +35,6 @@ __all__ = [
     "RoundoffFloorWarning", "LockedRodWarning", "Rod", "RodState", "rod_from_shape", "Scene",
     "clamp", "hinge", "roller", "pin", "fix_theta", "point_force", "end_force", "distributed_force", "end_torque",
     "twisting_moment", "point_torque", "follower_force",
-    "self_contact", "plane", "sphere", "cylinder",
+    "self_contact", "rod_contact", "plane", "sphere", "cylinder",
     "continuation", "Branch", "sweep", "SweepResult",
 ]

@@ -742,7 +742,7 @@ def contact_forces(scene, state):
     ----------
     scene : der.Scene with ``contacts`` (or the solver's internal system, which keeps the barrier stiffness the
         solve adapted: ``result.contact`` is this at the final state).
-    state : der.RodState
+    state : der.RodState (for a scene of several rods: ``result.state``, or one RodState per rod)
 
     Returns
     -------
@@ -770,9 +770,21 @@ def contact_forces(scene, state):
 
         if not scene.contacts:
             return {"n_contacts": 0, "min_distance": float("inf"), "total_force": 0.0, "terms": []}
-        check_state(scene.rod, state, "der.diagnostics.contact_forces")
-        system = build_system(scene, SolverOptions())
-        state = prepare_state(system, state)
+        if scene.scenes is not None:          # several rods: state is a MultiState or one RodState per rod
+            from .solvers.multi import MultiState, build_multi_system, prepare_multi_state
+
+            states = list(state.rods) if isinstance(state, MultiState) else list(state)
+            if len(states) != len(scene.scenes):
+                raise ValueError(f"der.diagnostics.contact_forces: give one state per rod ({len(scene.scenes)}); "
+                                 f"got {len(states)}")
+            for i, (r, s) in enumerate(zip(scene.rods, states)):
+                check_state(r, s, f"der.diagnostics.contact_forces: state of rod {i}")
+            system = build_multi_system(scene, SolverOptions())
+            state = prepare_multi_state(system, MultiState(states))
+        else:
+            check_state(scene.rod, state, "der.diagnostics.contact_forces")
+            system = build_system(scene, SolverOptions())
+            state = prepare_state(system, state)
         for t in system.terms:
             t.start_stiffness(state, system)
     terms = [t.diagnostics(state) for t in system.terms]

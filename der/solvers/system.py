@@ -51,6 +51,7 @@ class System:
     ab: np.ndarray
     links: object = NO_LINKS   # the end supports' dependents (constraints.Links): q = c + T y
     mass_full: np.ndarray = None   # lumped mass before condensation (``mass`` is T^T M T, lumped)
+    parts = None                   # a scene of several rods: a MultiSystem (multi.py) has its rods' systems here
 
     @property
     def n_dof(self):
@@ -244,6 +245,10 @@ def evaluate_system(system, state, order):
     """Energy; fills system.grad, system.fext (and system.ab with order 2). With contact terms their energy,
     gradient and band-local Hessian blocks are added, and their off-band Hessian triplets are left in
     ``system.contact_coo`` (a list of (rows, cols, vals); empty while no pair is active)."""
+    if system.parts is not None:          # several rods (multi.py)
+        from . import multi
+
+        return multi.evaluate_system(system, state, order)
     energy = evaluate(system.plan, state.q, state.d1, state.reference_twist, state.lam, order, system.grad,
                       system.fext, system.ab, system.kl, system.ku, system.perm)
     if system.terms:
@@ -261,6 +266,10 @@ def contact_force_scale(system):
 
 def load_scales(system, state):
     """(F_s, M_s): force and moment scales of the residual (see module docstring)."""
+    if system.parts is not None:          # several rods (multi.py)
+        from . import multi
+
+        return multi.load_scales(system, state)
     rod, plan = system.rod, system.plan
     F, M = _edge_forces(state.q, state.d1, state.reference_twist, state.lam, rod.edge_nodes, rod.vertex_nodes,
                         rod.vertex_edges, rod.l_bar, plan.k_stretch, plan.kappa_bar, rod.twist_bar, plan.weld,
@@ -402,6 +411,10 @@ def is_interrupt(exc):
 def final_result(system, state, status, **fields):
     """The SolveResult of a solve that ended in ``status`` at ``state``: the force-derived fields (load scale,
     residual per unit length, energy by term) are evaluated here, once, for both solvers."""
+    if system.parts is not None:          # several rods (multi.py)
+        from . import multi
+
+        return multi.final_result(system, state, status, **fields)
     from .options import CONVERGED_STATUSES, SolveResult
 
     evaluate_system(system, state, 1)
@@ -465,6 +478,10 @@ def support_reactions(system, state):
 
 
 def max_strain(system, state):
+    if system.parts is not None:          # several rods (multi.py)
+        from . import multi
+
+        return multi.max_strain(system, state)
     rod = system.rod
     return float(np.max(np.abs(elongations(state.q, rod.edge_nodes, rod.l_bar) / rod.l_bar)))
 
@@ -472,6 +489,10 @@ def max_strain(system, state):
 def constraint_residual(system, state, scales):
     """The elongation left in an inextensible rod as a residual (same units as ``residual_norm``): the force
     k_j |g_j| a multiplier update would shift, relative to the force scale."""
+    if system.parts is not None:          # several rods (multi.py)
+        from . import multi
+
+        return multi.constraint_residual(system, state, scales)
     rod = system.rod
     g = elongations(state.q, rod.edge_nodes, rod.l_bar)
     return float(np.max(system.k_stretch * np.abs(g)) / scales[0])
@@ -490,6 +511,10 @@ def multiplier_update(system, state, previous=None):
     itself nearly inextensible -- a straight rod under tension, a tight helix -- resists the multiplier update,
     and the remedy of the method of multipliers is a larger penalty. An elongation that changed sign means the
     update overshot: then the penalty is left alone."""
+    if system.parts is not None:          # several rods (multi.py)
+        from . import multi
+
+        return multi.multiplier_update(system, state, previous)
     rod = system.rod
     g = elongations(state.q, rod.edge_nodes, rod.l_bar)
     k = system.plan.k_stretch
@@ -505,6 +530,10 @@ def multiplier_update(system, state, previous=None):
 
 def transport(system, base, q_new, out):
     """Put ``q_new`` into ``out`` with frames transported from ``base``; False if an edge reversed/vanished."""
+    if system.parts is not None:          # several rods (multi.py)
+        from . import multi
+
+        return multi.transport(system, base, q_new, out)
     rod = system.rod
     if out is not base:
         out.q[:] = q_new
@@ -552,6 +581,10 @@ def prepare_state(system, state):
 
 def energy_terms(system, state):
     """Energy of each term the scene uses, plus the work of the constant generalized loads."""
+    if system.parts is not None:          # several rods (multi.py)
+        from . import multi
+
+        return multi.energy_terms(system, state)
     from ..energies.bend import bend_energy
     from ..energies.stretch import stretch_energy
     from ..energies.twist import twist_energy

@@ -71,6 +71,12 @@ def warmup():
                 t.evaluate(state, order, system.grad, system.ab, [])
             t.max_step(state, delta)
             t.diagnostics(state)
+    # a pair inside the barrier range (the rest states above have none): the pair assembly compiles here too
+    from .. import contact as C
+
+    topo = C.topology([(1, False, 0.02, 1.0), (1, False, 0.02, 1.0)], 0.002)
+    pos = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.5, -0.5, 0.041], [0.5, 0.5, 0.041]])
+    C.barrier_system(pos, topo, np.array([[0, 1]], dtype=np.int64), 0.002, 1.0, 4 * np.arange(4), 16)
     _WARM.append(time.perf_counter() - t0)
     return _WARM[0]
 

@@ -25,10 +25,16 @@ class Rod:
     ----------
     closed : bool
         True for a ring (the last node joins the first).
-    A1, A2 : float
-        Bending and twisting stiffness (paper Eq. 17), force * length^2.
-    EA : float or None
-        Axial stiffness (force). ``None`` (default): inextensible, enforced exactly by the solvers.
+    A1, A2 : float or (n_vertices,) array
+        Bending and twisting stiffness (paper Eq. 17), force * length^2: a float for a uniform rod, one value per
+        vertex for a rod that varies along its length (``der.rod``). A1 is the stiffness of the material
+        curvature kappa1 = kb . m2 (bending towards m1, about m2).
+    A1prime : None, float or (n_vertices,) array
+        The second bending stiffness A1' (kappa2 = -kb . m1: bending towards m2, about m1); None: isotropic,
+        A1' = A1 (``bending_stiffness()`` gives both per vertex).
+    EA : float, (n_edges,) array or None
+        Axial stiffness (force), uniform or per edge. ``None`` (default): inextensible, enforced exactly by the
+        solvers.
     edge_nodes : (n_edges, 2) int
         Node indices of each edge.
     vertex_nodes : (n_vertices, 3) int, vertex_edges : (n_vertices, 2) int
@@ -44,8 +50,10 @@ class Rod:
         (a Rod built directly) means both sides equal ``kappa_bar``. Set both with ``with_natural``.
     twist_bar : (n_vertices,)
         Natural integrated twist (radians); omega0 * D in the continuum.
-    rest_q : (n_dof,) rest state vector; rest_d1 : (n_edges, 3) rest reference (= material) directors;
-    rest_twist : (n_vertices,) rest reference twist.
+    rest_q : (n_dof,) state vector of the start (the rest shape for ``rod_from_shape``; the start of ``der.rod``,
+    which may differ from its rest); rest_d1 : (n_edges, 3) its reference (= material) directors;
+    rest_twist : (n_vertices,) its reference twist. The natural strains (``kappa_bar``, ``twist_bar``) and
+    ``l_bar`` alone define the rest state.
     rho_A, rho_J : float
         Line density and rotational inertia per length used by the dynamics (they do not change equilibria).
     imposed_twist : float
@@ -57,7 +65,8 @@ class Rod:
     (where clamps, end forces and end torques act) are the midpoints of the end edges, at xi = 0 and xi = L,
     so the first and last nodes lie half an edge outside [0, L] (``xi_nodes``). A ring has n nodes.
 
-    Build one with ``der.rod_from_shape``; the copies ``with_natural``, ``with_stiffness`` and
+    Build one with ``der.rod(rest=..., start=..., A1=..., A2=...)`` (rest and start apart, stiffness varying) or
+    ``der.rod_from_shape`` (rest = start = a shape); the copies ``with_natural``, ``with_stiffness`` and
     ``with_imposed_twist`` change one property. A rod is immutable; its configuration is a ``RodState``.
 
     Example

@@ -33,8 +33,8 @@ def tapered_tip_deflection(L, P, A_root, A_tip):
     Example
     -------
     >>> import der.references as ref
-    >>> round(ref.tapered_tip_deflection(1.0, 1.0, 2.0, 1.0), 6)
-    0.227411
+    >>> round(float(ref.tapered_tip_deflection(1.0, 1.0, 2.0, 1.0)), 6)    # int (1 - s)^2 / (2 - s) = ln 2 - 1/2
+    0.193147
     """
     a, c = float(A_root), float(A_tip)
     if abs(c - a) <= 1e-6 * a:
@@ -42,7 +42,7 @@ def tapered_tip_deflection(L, P, A_root, A_tip):
         b = (c - a) / L
         return P * L ** 3 * (1.0 / (3 * a) - b * L / (12 * a * a) + (b * L) ** 2 / (30 * a ** 3))
     b = (c - a) / L
-    return P / b ** 3 * (c * c * np.log(c / a) - 2 * c * (c - a) + 0.5 * (c * c - a * a))
+    return float(P / b ** 3 * (c * c * np.log(c / a) - 2 * c * (c - a) + 0.5 * (c * c - a * a)))
 
 
 def anisotropic_cantilever_linear(L, P, A1, A1prime):

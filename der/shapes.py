@@ -434,6 +434,7 @@ def _profile(value, name, where):
 def _evaluate(fun, xi, name, where):
     """``fun`` at the arc lengths ``xi`` as a finite float array of xi's shape (called point by point if it is
     not vectorised), or a ValueError naming the argument."""
+    where = where if where.startswith("der.") else f"der.shapes.{where}"
     xi = np.asarray(xi, float)
     try:
         out = np.asarray(fun(xi), dtype=float)
@@ -443,11 +444,11 @@ def _evaluate(fun, xi, name, where):
         try:
             out = np.array([float(fun(float(v))) for v in xi.ravel()]).reshape(xi.shape)
         except Exception as exc:
-            raise TypeError(f"der.shapes.{where}: {name} must be a number or a function of the arc length xi "
+            raise TypeError(f"{where}: {name} must be a number or a function of the arc length xi "
                             f"returning a real number; calling it failed: {exc}") from None
     if not np.all(np.isfinite(out)):
         i = int(np.argmax(~np.isfinite(out.ravel())))
-        raise ValueError(f"der.shapes.{where}: {name} must be finite along the rod; at xi = "
+        raise ValueError(f"{where}: {name} must be finite along the rod; at xi = "
                          f"{xi.ravel()[i]:.6g} it is {out.ravel()[i]}")
     return out
 

@@ -140,6 +140,28 @@ def test_the_bvp_references_agree_with_the_closed_forms():
                       quad(lambda s: (1 - s) ** 2 / (2.0 - 1.5 * s), 0, 1)[0], rtol=1e-12)
 
 
+def test_bar_with_varying_EA_stretches_by_the_integral_of_P_over_EA_second_order():
+    """Per-edge EA (a function of xi at the edge midpoints): a bar pulled by P stretches by P int ds / EA(s)."""
+    P, errs = 0.01, []
+    exact = P * np.log(2.0)                       # EA(s) = 1 + s on [0, 1]
+    for n in NS:
+        rod = der.rod(rest=der.shapes.straight(1.0, n), A1=1.0, A2=1.0, EA=lambda s: 1.0 + s)
+        res = _solve(Scene(rod, loads=[der.end_force([0, 0, P])], constraints=[der.clamp("start")]), tol=1e-12)
+        errs.append(abs(_end_centre(res.state)[2] - 1.0 - exact) / exact)
+    assert errs[-1] < 1e-4 and _order(errs, NS) > 1.8, errs
+
+
+def test_with_stiffness_takes_per_vertex_arrays():
+    rod = der.rod_from_shape(der.shapes.straight(1.0, 10), 1.0, 1.0)
+    a = np.linspace(1.0, 2.0, rod.n_vertices)
+    varied = rod.with_stiffness(A1=a, A1prime=2 * a, EA=np.full(rod.n_edges, 50.0))
+    assert np.array_equal(varied.bending_stiffness(), np.stack([a, 2 * a], axis=1))
+    assert not varied.isotropic and varied.bending_scale == 4.0 and varied.axial_stiffness().shape == (10,)
+    assert rod.with_stiffness(A1prime=None).isotropic
+    with pytest.raises(ValueError, match="A1prime"):
+        rod.with_stiffness(A1prime=np.ones(3))
+
+
 # --------------------------------------------------------------------------------------------- kernels
 
 

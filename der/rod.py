@@ -753,7 +753,7 @@ def rod(rest, start=None, *, A1, A2, EA=None, A1prime=None, rho_A=1.0, rho_J=Non
         edge lengths, its natural curvatures (both material components, per edge side) and twists are measured
         on it with the energies' own kernels (material frame on its Frenet frame, or on its director for
         ``polyline(..., director=...)``), so that this shape is exactly force-free. Or strains along the arc
-        length (``der.shapes.strains``: kappa1, kappa2, omega0 per vertex, equal rest edge lengths).
+        length (``der.shapes.strains``: kappa1, kappa2, omega0 per vertex, the rest edge lengths equal or given).
     start : None, "rest", "straight" or der.shapes.Shape
         The starting state (``Rod.start_state()``, what ``der.solve`` starts from). None: the rest shape when
         ``rest`` is a shape, else "straight". "straight": along e3 from the origin, with the rest edge lengths,
@@ -799,8 +799,7 @@ def rod(rest, start=None, *, A1, A2, EA=None, A1prime=None, rho_A=1.0, rho_J=Non
     rho_A, rho_J = _check_inertia(rho_A, rho_J, where)
     if isinstance(rest, Strains):
         n_edges, closed = rest.n, rest.closed
-        h = rest.length / (n_edges if closed else n_edges - 1)
-        l_bar = np.full(n_edges, h)
+        l_bar = np.array(rest.l_bar, dtype=float)
         edge_nodes, vertex_nodes, vertex_edges = topology(n_edges, closed)
         voronoi = 0.5 * (l_bar[vertex_edges[:, 0]] + l_bar[vertex_edges[:, 1]])
         k = rest.kappa * voronoi[:, None]            # integrated material curvature at the vertex's mid frame

@@ -528,11 +528,13 @@ class Strains:
     length : float
         Rest length L.
     n : int
-        Number of edges (equal rest lengths h = L / (n - 1) open, L / n closed).
+        Number of edges.
     closed : bool
         True for a ring.
+    l_bar : (n,) array
+        Rest edge lengths (equal by default: h = L / (n - 1) open, L / n closed).
     xi : (n_vertices,) array
-        Rest arc length of each vertex (open: h/2, 3h/2, ..., L - h/2; ring: 0, h, ...).
+        Rest arc length of each vertex (equal edges, open: h/2, 3h/2, ..., L - h/2; ring: 0, h, ...).
     kappa : (n_vertices, 2) array
         Natural material curvatures (kappa1, kappa2) at the vertices (1/length).
     omega : (n_vertices,) array
@@ -548,12 +550,13 @@ class Strains:
     length: float
     n: int
     closed: bool
+    l_bar: np.ndarray
     xi: np.ndarray
     kappa: np.ndarray
     omega: np.ndarray
 
 
-def strains(length, n, kappa1=0.0, kappa2=0.0, omega=0.0, closed=False):
+def strains(length, n, kappa1=0.0, kappa2=0.0, omega=0.0, closed=False, lengths=None):
     """A rest state given by its natural strains along the arc length: material curvatures kappa1, kappa2 and
     twist omega0, set independently of any shape.
 
@@ -574,6 +577,9 @@ def strains(length, n, kappa1=0.0, kappa2=0.0, omega=0.0, closed=False):
         value per vertex (n - 1 open, n closed). 1/length.
     closed : bool
         True for a ring.
+    lengths : (n,) array, optional
+        Rest edge lengths, > 0 (default: all equal). They must add up to ``length``: for an open rod the sum
+        minus half of each end edge (whose midpoints are the ends), for a ring the sum.
 
     Returns
     -------
@@ -590,12 +596,20 @@ def strains(length, n, kappa1=0.0, kappa2=0.0, omega=0.0, closed=False):
     n = _check_n(n, 3 if closed else 2, "strains")
     length, = _check_positive("strains", length=length)
     closed = bool(closed)
-    if closed:
-        h = length / n
-        xi = h * np.arange(n)
+    if lengths is None:
+        l_bar = np.full(n, length / (n if closed else n - 1))
     else:
-        h = length / (n - 1)
-        xi = h * (np.arange(1, n) - 0.5)
+        l_bar = validate.finite_array(lengths, "der.shapes.strains: lengths", (n,),
+                                      f"a finite array of shape ({n},) of edge lengths > 0")
+        if np.any(l_bar <= 0):
+            raise ValueError(f"der.shapes.strains: lengths must be > 0; edge {int(np.argmax(l_bar <= 0))} has "
+                             f"{l_bar[l_bar <= 0][0]!r}")
+        total = l_bar.sum() if closed else l_bar.sum() - 0.5 * (l_bar[0] + l_bar[-1])
+        if abs(total - length) > 1e-12 * length:
+            raise ValueError(f"der.shapes.strains: lengths must add up to length = {length!r}"
+                             f"{'' if closed else ' (less half of each end edge)'}; they add up to {total!r}")
+    nodes = np.concatenate([[0.0], np.cumsum(l_bar)])
+    xi = nodes[:n] if closed else nodes[1:n] - 0.5 * l_bar[0]
     nv = xi.size
     out = []
     for name, value in (("kappa1", kappa1), ("kappa2", kappa2), ("omega", omega)):
@@ -610,4 +624,4 @@ def strains(length, n, kappa1=0.0, kappa2=0.0, omega=0.0, closed=False):
                 raise ValueError(f"der.shapes.strains: {name} must be a number, a function of xi, or an array of "
                                  f"shape ({nv},) (one per vertex: {n} edges); got shape {arr.shape}")
             out.append(arr)
-    return Strains(float(length), n, closed, xi, np.stack(out[:2], axis=1), out[2])
+    return Strains(float(length), n, closed, l_bar, xi, np.stack(out[:2], axis=1), out[2])

@@ -227,6 +227,22 @@ def test_a_rest_given_by_strains_is_force_free_and_reached_from_a_straight_start
     assert np.abs(k - rod.kappa_bar_edges).max() < 1e-8
 
 
+def test_strains_with_unequal_rest_lengths_relax_to_the_same_curve():
+    """Explicit rest edge lengths: an arc of curvature 1 with unequal edges is force-free and has curvature 1."""
+    n, L = 24, 2.0
+    w = 1.0 + 0.5 * np.sin(np.arange(n))
+    lengths = w * L / (w.sum() - 0.5 * (w[0] + w[-1]))
+    rest = der.shapes.strains(L, n, kappa1=1.0, lengths=lengths)
+    assert np.allclose(rest.xi, np.cumsum(lengths)[:-1] - 0.5 * lengths[0])
+    rod = der.rod(rest=rest, A1=1.0, A2=1.0)
+    assert np.array_equal(rod.l_bar, lengths) and np.isclose(rod.length, L)
+    res = _solve(Scene(rod, constraints=[der.clamp("start")]), tol=1e-10)
+    from der.diagnostics import internal_moments
+    assert np.abs(internal_moments(rod, res.state)).max() < 1e-8
+    with pytest.raises(ValueError, match="lengths must add up to length"):
+        der.shapes.strains(L + 0.1, n, lengths=lengths)
+
+
 def test_a_rest_shape_with_a_straight_start_relaxes_to_the_rest_shape():
     arc = der.shapes.arc(1.0, 2.5, 24)
     rod = der.rod(rest=arc, start="straight", A1=1.0, A2=1.5)

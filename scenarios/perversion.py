@@ -13,7 +13,7 @@ midpoint, a boundary of the vertices' cells; with n - 1 odd it falls on a vertex
 curvature 0, and the error is first order). Also reported: the clamp reactions against the reference
 (transverse force Fx and moment M0).
 
-    python scenarios/perversion.py [--L 2] [--kappa0 1.5] [--A1 1] [--A2 1] [--P 1] [--n 81]
+    python scenarios/perversion.py [--L 2] [--kappa0 1.5] [--A1 1] [--A2 1] [--P 1] [--EA none] [--n 81]
 """
 import sys
 
@@ -31,6 +31,8 @@ PARAMETERS = [
     ("A2", 1.0, float, "twisting stiffness", POSITIVE),
     ("P", 1.0, float, "pull on the sliding end along e3 (force)",
      Range(0.0, lambda p: 20.0 * p.A1 / p.L ** 2, why="0 <= P <= 20 A1 / L^2")),
+    ("EA", None, float, "axial stiffness (default: inextensible, as the reference; a finite EA adds an error "
+                        "of order P / EA, and lets the explicit solver hold the sliding clamp)", POSITIVE),
 ]
 
 
@@ -43,7 +45,7 @@ def natural_curvature(p, xi):
 
 def build(p):
     rest = der.shapes.strains(p.L, p.n, kappa1=lambda xi: natural_curvature(p, xi))
-    rod = der.rod(rest=rest, start="straight", A1=p.A1, A2=p.A2)
+    rod = der.rod(rest=rest, start="straight", A1=p.A1, A2=p.A2, EA=p.EA)
     return der.Scene(rod, loads=[der.end_force([0.0, 0.0, p.P])],
                      constraints=[der.clamp("start"), der.clamp("end", slide=(0.0, 0.0, 1.0))])
 

@@ -117,7 +117,7 @@ def test_perversion_scenario_json_contract_and_recording(tmp_path):
     assert out.returncode == 0, out.stderr
     record = json.loads(out.stdout.strip().splitlines()[-1])
     assert record["converged"] is True and record["error"] < 5e-4
-    assert record["params"] == {"L": 2.0, "kappa0": 1.5, "A1": 1.0, "A2": 1.0, "P": 1.0}
+    assert record["params"] == {"L": 2.0, "kappa0": 1.5, "A1": 1.0, "A2": 1.0, "P": 1.0, "EA": None}
     assert [r["end"] for r in record["reactions"]] == ["start", "end"]
     assert abs(sum(r["force"][0] for r in record["reactions"])) < 1e-8      # the transverse reactions balance
     ok, msg = verify(tmp_path / "p.rrd")

@@ -285,6 +285,50 @@ def test_bad_input_is_refused_naming_the_argument(call, words):
         assert w in str(info.value), (w, str(info.value))
 
 
+def _refused(call):
+    """The error der raises for a bad argument: a TypeError/ValueError from der's own code, with a message."""
+    from fuzzing import GENERIC_MESSAGES, _raised_by_der
+    try:
+        out = call()
+    except (TypeError, ValueError) as exc:
+        assert _raised_by_der(exc), f"not raised by der: {exc!r}"
+        assert not any(g in str(exc) for g in GENERIC_MESSAGES), str(exc)
+        return str(exc)
+    return out
+
+
+def test_every_careless_value_of_every_new_argument_is_refused_or_finite():
+    """Each argument of der.rod, der.shapes.strains and der.sections with each careless value: refused naming the
+    argument, or (1e300 where it is still a valid number) a rod without a NaN."""
+    from fuzzing import BAD_SCALARS
+    shape = der.shapes.straight(1.0, 6)
+    good = dict(rest=shape, A1=1.0, A2=1.0, EA=None, A1prime=None)
+    for name in ("A1", "A2", "EA", "A1prime"):
+        for bad in BAD_SCALARS:
+            if bad is None and name in ("EA", "A1prime"):
+                continue                                   # None is allowed: inextensible / isotropic
+            out = _refused(lambda: der.rod(**{**good, name: bad}))
+            if isinstance(out, str):
+                assert name in out, (name, bad, out)
+            else:
+                assert np.all(np.isfinite(out.bending_stiffness())), (name, bad)
+    for bad in (*(b for b in BAD_SCALARS if b is not None), "bent", np.zeros(3)):   # None: the default start
+        out = _refused(lambda: der.rod(rest=shape, start=bad, A1=1.0, A2=1.0))
+        assert isinstance(out, str) and "start" in out, (bad, out)
+    for name in ("kappa1", "kappa2", "omega"):
+        for bad in BAD_SCALARS:
+            out = _refused(lambda: der.shapes.strains(1.0, 6, **{name: bad}))
+            if isinstance(out, str):
+                assert name in out, (name, bad, out)
+            else:
+                assert np.all(np.isfinite(out.kappa)) and np.all(np.isfinite(out.omega)), (name, bad)
+    for fn, args in ((der.sections.circle, (0.1,)), (der.sections.rectangle, (0.1, 0.2)),
+                     (der.sections.ellipse, (0.1, 0.2)), (der.sections.annulus, (0.2, 0.1))):
+        for bad in BAD_SCALARS:
+            out = _refused(lambda: fn(*args, E=bad, nu=0.3))
+            assert isinstance(out, str) and "E" in out or np.all(np.isfinite(out.A1)), (fn.__name__, bad, out)
+
+
 # --------------------------------------------------------------------------------------------- sections, shapes
 
 
@@ -330,6 +374,12 @@ def test_spline_through_circle_points_is_equally_spaced_with_the_circle_curvatur
         rod = der.rod(rest=der.shapes.spline(pts, n), A1=1.0, A2=1.0)
         errs.append(np.abs(np.linalg.norm(rod.kappa_bar, axis=1) / rod.voronoi - 1.0).max())
     assert max(errs) < 1e-2, errs
+    # a closed spline through points on a circle: a ring of equal edges and curvature 1
+    phi = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    ring = der.shapes.spline(np.stack([np.cos(phi), np.sin(phi), 0 * phi], axis=1), 30, closed=True)
+    rod = der.rod(rest=ring, A1=1.0, A2=1.0)
+    assert rod.closed and np.ptp(rod.l_bar) < 1e-4 * rod.l_bar.mean()
+    assert np.abs(np.linalg.norm(rod.kappa_bar, axis=1) / rod.voronoi - 1.0).max() < 2e-2
 
 
 def test_varying_helix_has_the_given_curvature_and_torsion_second_order():

@@ -32,7 +32,8 @@ from .sweep import SweepResult, sweep
 from .warmup import warmup
 
 __all__ = [
-    "shapes", "sections", "diagnostics", "solve", "check_stability", "warmup", "SolverOptions", "SolveResult", "ConvergenceError",
+    "shapes", "sections", "diagnostics", "solve", "check_stability", "warmup", "SolverOptions", "SolveResult",
+    "ConvergenceError",
     "RoundoffFloorWarning", "LockedRodWarning", "Rod", "RodState", "rod", "rod_from_shape", "Scene",
     "clamp", "hinge", "roller", "pin", "fix_theta", "point_force", "end_force", "distributed_force", "end_torque",
     "twisting_moment", "point_torque", "follower_force",

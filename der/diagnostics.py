@@ -555,7 +555,8 @@ def internal_forces(rod, state, k_stretch=None, energies=("stretch", "bend", "tw
     kappa_bar = rod.natural_curvature_edges().reshape(-1, 4)
     return _edge_forces(state.q, state.d1, state.reference_twist, lam, rod.edge_nodes, rod.vertex_nodes,
                         rod.vertex_edges, rod.l_bar, np.asarray(k_stretch, float), kappa_bar, rod.twist_bar,
-                        rod.weld, rod.voronoi, rod.kernel_bending(), rod.kernel_twisting(), "stretch" in energies, "bend" in energies,
+                        rod.weld, rod.voronoi, rod.kernel_bending(), rod.kernel_twisting(), "stretch" in energies,
+                        "bend" in energies,
                         "twist" in energies)[0]
 
 

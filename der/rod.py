@@ -123,16 +123,24 @@ class Rod:
             return None
         return np.broadcast_to(np.asarray(self.EA, float), (self.n_edges,)).copy()
 
+    @property
+    def uniform(self):
+        """True when A1, A2 are single numbers and A1' = A1 (every rod built by ``rod_from_shape``)."""
+        return np.ndim(self.A1) == 0 and np.ndim(self.A2) == 0 and self.A1prime is None
+
     def kernel_bending(self):
-        """What the bending kernels take (``energies.stiffness.bending_at``): ``A1`` itself when isotropic (a
-        float keeps every result bitwise that of a uniform rod), else the (n_vertices, 2) array of (A1, A1')."""
-        if self.A1prime is None:
-            return self.A1 if np.ndim(self.A1) == 0 else np.ascontiguousarray(self.A1, dtype=float)
+        """What the bending kernels take (``energies.stiffness.bending_at``): the float ``A1`` of a uniform rod
+        (every result bitwise that of a scalar stiffness), else the (n_vertices, 2) array of (A1, A1'). Two
+        types only, so that the kernels are compiled twice at most (``der.warmup`` does both)."""
+        if self.uniform:
+            return self.A1
         return np.ascontiguousarray(self.bending_stiffness())
 
     def kernel_twisting(self):
-        """What the twisting kernels take: ``A2`` (a float, or a contiguous (n_vertices,) array)."""
-        return self.A2 if np.ndim(self.A2) == 0 else np.ascontiguousarray(self.A2, dtype=float)
+        """What the twisting kernels take: the float ``A2`` of a uniform rod, else the (n_vertices,) array."""
+        if self.uniform:
+            return self.A2
+        return np.ascontiguousarray(self.twisting_stiffness())
 
     @property
     def bending_scale(self):

@@ -419,7 +419,8 @@ def main():
     e = anisotropic_linear_errors()
     rows = [[str(n), f"{a:.3e}", f"{b:.3e}"] for n, (a, b) in zip(NS, e)]
     rows.append(["order", f"{_order(e[:, 0], NS):.2f}", f"{_order(e[:, 1], NS):.2f}"])
-    table("anisotropic cantilever, linear", rows, ["n", "tip x rel. error (P L^3/3A1)", "tip y rel. error (P L^3/3A1')"])
+    table("anisotropic cantilever, linear", rows,
+          ["n", "tip x rel. error (P L^3/3A1)", "tip y rel. error (P L^3/3A1')"])
     e, r_tip = anisotropic_large_errors()
     rows = [[str(n), f"{a:.3e}"] for n, a in zip(NS, e)] + [["order", f"{_order(e, NS):.2f}"]]
     table(f"anisotropic cantilever, large deflection (BVP tip {np.round(r_tip, 5).tolist()})", rows,

@@ -469,7 +469,8 @@ def stability(system, result, n_eigenvalues=6):
     if symmetric and out["method"] != "dense":
         # shift-invert finds the eigenvalues nearest sigma: count all negative ones (below the floor) by
         # inertia as a check
-        shift = -max(float(out["floors"].max()), 1e-3 * system.rod.bending_scale / (system.rod.rho_A * system.rod.length ** 4))
+        shift = -max(float(out["floors"].max()),
+                     1e-3 * system.rod.bending_scale / (system.rod.rho_A * system.rod.length ** 4))
         n_neg = band_negative_pivots(system.ab, system.kl, system.ku, system.perm, shift, eigen_mass(system.rod),
                                      ~_free_full(system))
         found = int(np.sum(ev.real < shift))

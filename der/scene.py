@@ -258,7 +258,7 @@ def make_plan(scene, k_stretch):
         "stretch" in scene.energies, "bend" in scene.energies, "twist" in scene.energies,
         rod.edge_nodes, rod.vertex_nodes, rod.vertex_edges,
         rod.l_bar, rod.voronoi, rod.natural_curvature_edges().reshape(-1, 4), rod.twist_bar, rod.weld,
-        rod.A1, rod.A2,
+        rod.kernel_bending(), rod.kernel_twisting(),   # floats for a uniform isotropic rod (energies.stiffness)
         np.array(k_stretch, dtype=float),        # a copy: the solver may raise the penalty in place
         has_nodal, nodal, has_theta, theta,
         len(t_edges) > 0, np.array(t_edges, dtype=np.int64), np.array(t_vecs, dtype=float).reshape(-1, 3),

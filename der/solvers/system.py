@@ -73,7 +73,7 @@ def axial_penalty(rod, options):
     P L / EA (issue 13: with full-weight end edges the end edges carried P/2 and the bar stretched 1% short at
     n = 50)."""
     if rod.inextensible:
-        return options.inextensible_penalty * rod.A1 / rod.l_bar ** 3
+        return options.inextensible_penalty * rod.bending_scale / rod.l_bar ** 3
     k = np.broadcast_to(np.asarray(rod.EA, float), rod.l_bar.shape) / rod.l_bar
     if not rod.closed:
         k = k.copy()
@@ -88,7 +88,7 @@ def rotational_inertia(rod):
     if rod.rho_J is not None:
         return rod.rho_J
     h = rod.l_bar.mean()
-    return rod.rho_A * h * h * rod.A2 / (4.0 * rod.A1)
+    return rod.rho_A * h * h * rod.twisting_scale / (4.0 * rod.bending_scale)
 
 
 def safe_norm(v):
@@ -273,7 +273,7 @@ def load_scales(system, state):
     rod, plan = system.rod, system.plan
     F, M = _edge_forces(state.q, state.d1, state.reference_twist, state.lam, rod.edge_nodes, rod.vertex_nodes,
                         rod.vertex_edges, rod.l_bar, plan.k_stretch, plan.kappa_bar, rod.twist_bar, plan.weld,
-                        rod.voronoi, rod.A1, rod.A2, plan.has_stretch, plan.has_bend, plan.has_twist)
+                        rod.voronoi, plan.A1, plan.A2, plan.has_stretch, plan.has_bend, plan.has_twist)
     f_int = float(max_row_norm(F)) if F.size else 0.0
     m_int = float(M.max()) if M.size else 0.0
     L = rod.length
@@ -282,7 +282,7 @@ def load_scales(system, state):
     # rest would otherwise be judged against its round-off, with a residual of order 1 for ever
     X = max(float(np.abs(state.q.reshape(-1, 4)[:, :3]).max()), L)
     h = float(rod.l_bar.min())
-    A = max(rod.A1, rod.A2)
+    A = max(rod.bending_scale, rod.twisting_scale)
     eps100 = 100.0 * np.finfo(float).eps
     if f_int <= eps100 * X * (A / h ** 3 + float(plan.k_stretch.max(initial=0.0))):
         f_int = 0.0
@@ -291,7 +291,7 @@ def load_scales(system, state):
     F_raw = max(system.applied_force, f_int, contact_force_scale(system))   # contact forces are loads too
     M_raw = max(system.applied_moment, m_int)
     if F_raw == 0.0 and M_raw == 0.0:
-        return rod.A1 / L ** 2, rod.A1 / L
+        return rod.bending_scale / L ** 2, rod.bending_scale / L
     # a force scale implies a moment scale over the rod length and vice versa (e.g. a rod loaded only by
     # torques has no force of its own: round-off forces must not set the scale)
     return max(F_raw, M_raw / L), max(M_raw, F_raw * L)
@@ -595,10 +595,10 @@ def energy_terms(system, state):
         out["stretch"] = float(stretch_energy(state.q, rod.edge_nodes, rod.l_bar, plan.k_stretch, state.lam))
     if plan.has_bend:
         ed = edge_frames(state.q, rod.edge_nodes, state.d1)
-        out["bend"] = float(bend_energy(ed, rod.vertex_edges, plan.weld, plan.kappa_bar, rod.voronoi, rod.A1))
+        out["bend"] = float(bend_energy(ed, rod.vertex_edges, plan.weld, plan.kappa_bar, rod.voronoi, plan.A1))
     if plan.has_twist:
         out["twist"] = float(twist_energy(state.q, rod.vertex_edges, state.reference_twist, plan.weld, rod.twist_bar,
-                                          rod.voronoi, rod.A2))
+                                          rod.voronoi, plan.A2))
     if system.terms:
         out["contact"] = float(sum(t.evaluate(state, 0, None, None, None) for t in system.terms))
     return out

@@ -225,7 +225,9 @@ def _m_orthonormal(V, m):
 
     V = V / np.sqrt(np.einsum("ij,i,ij->j", V, m, V))[None, :]
     _, R, piv = la.qr(V * np.sqrt(m)[:, None], mode="economic", pivoting=True)
-    rank = int(np.sum(np.abs(np.diag(R)) > 1e-8 * abs(R[0, 0])))
+    # symmetry modes are either independent (|R_kk| ~ |R_00|) or dependent up to round-off in the state; the
+    # Cholesky factor of the Gram matrix below fails from |R_kk| ~ 1e-8 |R_00| (condition 1e16), so cut at 1e-6
+    rank = int(np.sum(np.abs(np.diag(R)) > 1e-6 * abs(R[0, 0])))
     # M-orthonormalise the independent columns through V itself (massless DOFs keep their part of the mode)
     Vk = V[:, np.sort(piv[:rank])]
     Lc = np.linalg.cholesky(Vk.T @ (m[:, None] * Vk))

@@ -106,13 +106,13 @@ def test_floor_does_not_depend_on_where_the_rod_is():
     # issue 17: coordinates far from the origin were rounded at eps |x|, and the floor grew with |x| (a rod 1e10
     # away had a floor above 1). Edges are formed from compensated coordinates now: the floor, and the solve,
     # are the same wherever the rod is.
-    scene = cantilever(40, [0, 0, 1e-3], EA=1e6)
-    system = build_system(scene, SolverOptions())
     floors = []
     for offset in (0.0, 1e10):
-        start = scene.rod.rest_state()
-        start.q.reshape(-1, 4)[:, :3] += offset
-        state = prepare_state(system, start)
+        s = straight(40)
+        rod = der.rod_from_shape(shapes.Shape(s.positions + offset, s.closed, s.director), 1.0, 1.0, EA=1e6)
+        scene = der.Scene(rod, loads=[der.end_force([0, 0, 1e-3])], constraints=[der.clamp("start")])
+        system = build_system(scene, SolverOptions())
+        state = prepare_state(system, rod.rest_state())
         evaluate_system(system, state, 2)
         floors.append(residual_floor(system, state, load_scales(system, state)))
     assert floors[1] < 1e-4 and floors[1] == pytest.approx(floors[0], rel=1e-3)   # (edges rounded at ulp(1e10))

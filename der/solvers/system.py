@@ -268,10 +268,12 @@ def load_scales(system, state):
     f_int = float(max_row_norm(F)) if F.size else 0.0
     m_int = float(M.max()) if M.size else 0.0
     L = rod.length
-    # internal forces no larger than their own round-off (rounding every coordinate by eps |x| moves a node
-    # force by ~ eps |x| (A / h^3 + k) and a moment by ~ eps |x| A / h^2) define no scale: an unloaded rod at
-    # rest would otherwise be judged against its round-off, with a residual of order 1 for ever
-    X = max(float(np.abs(state.q.reshape(-1, 4)[:, :3]).max()), L)
+    # internal forces no larger than their own round-off (rounding every edge by eps |e| -- compensated
+    # coordinates, geometry.edge_array -- moves a node force by ~ eps |e| (A / h^3 + k) and a moment by
+    # ~ eps |e| A / h^2) define no scale: an unloaded rod at rest would otherwise be judged against its round-off,
+    # with a residual of order 1 for ever. (With |x| in place of |e| the internal forces of a rod far from the
+    # origin counted as round-off, and its residual was judged against the applied load alone.)
+    X = float(rod.l_bar.max())
     h = float(rod.l_bar.min())
     A = max(rod.A1, rod.A2)
     eps100 = 100.0 * np.finfo(float).eps

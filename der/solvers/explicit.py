@@ -225,9 +225,10 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
     """
     rod = system.rod
     if state.q_lo is not None:
-        # the FIRE kernel steps the coordinates alone (no compensated low parts): fold them in
+        # the FIRE kernel steps the coordinates alone (no compensated low parts): fold them in, and let the
+        # floor bound see plain absolute coordinates (system.rounding_scale)
         state.q += state.q_lo
-        state.q_lo[:] = 0.0
+        state.q_lo = None
     project = rod.inextensible
     fixed = system.fixed
     w = inverse_mass(system)

@@ -274,6 +274,8 @@ def load_scales(system, state):
     # with a residual of order 1 for ever. (With |x| in place of |e| the internal forces of a rod far from the
     # origin counted as round-off, and its residual was judged against the applied load alone.)
     X = float(rod.l_bar.max())
+    if state.q_lo is None:       # plain absolute coordinates (the explicit solver): rounded at |x|
+        X = max(float(np.abs(state.q.reshape(-1, 4)[:, :3]).max()), rod.length)
     h = float(rod.l_bar.min())
     A = max(rod.A1, rod.A2)
     eps100 = 100.0 * np.finfo(float).eps
@@ -314,8 +316,14 @@ def rounding_scale(system, state):
     """Per DOF, the size of the rounding the force evaluation sees (length units for node DOFs, radians for
     angles): a node's positions enter only through the edges beside it (``geometry.edge_array``), each formed from
     compensated coordinates and so rounded at its own length -- the longest edge at the node --, an angle at its
-    own size (at least 1 rad: the trigonometry of the frames rounds at eps absolute)."""
+    own size (at least 1 rad: the trigonometry of the frames rounds at eps absolute). A state without low parts
+    (``q_lo`` None: the explicit solver's plain coordinates) is rounded at |x| per coordinate."""
     rod = system.rod
+    if state.q_lo is None:
+        # plain absolute coordinates (the explicit solver): each rounded at its own size
+        w = np.maximum(np.abs(state.q), float(rod.l_bar.max()))
+        w[3::4] = np.maximum(np.abs(state.q[3::4]), 1.0)
+        return FLOOR_ROUNDINGS * w
     le = np.sqrt((state_edges(system, state) ** 2).sum(axis=1))
     node = np.zeros(rod.n_nodes)
     np.maximum.at(node, rod.edge_nodes[:, 0], le)
@@ -368,8 +376,20 @@ def newton_steps(system, state, rhs):
     diag[diag == 0] = 1.0
     add_diagonal(ab, system.kl, system.ku, system.perm, diag, 1e-14)   # regularises the symmetry modes
     constrain_system(system, ab, 1.0)
-    delta, info = band_solve(ab, system.kl, system.ku, system.perm, rhs)
-    if info != 0 or not np.all(np.isfinite(delta)):
+    coo = getattr(system, "contact_coo", None)
+    if coo:
+        # contact couples DOFs off the band: the implicit solver's sparse path (band + contact triplets)
+        from .implicit import _contact_solve
+        cols = [_contact_solve(system, ab.copy(order="F"), coo, np.ascontiguousarray(rhs[:, c]))
+                for c in range(rhs.shape[1])]
+        if any(info != 0 for _, info in cols):
+            return None
+        delta = np.column_stack([x for x, _ in cols])
+    else:
+        delta, info = band_solve(ab, system.kl, system.ku, system.perm, rhs)
+        if info != 0:
+            return None
+    if not np.all(np.isfinite(delta)):
         return None
     for c in range(delta.shape[1]):
         col = np.ascontiguousarray(delta[:, c])

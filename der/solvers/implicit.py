@@ -196,7 +196,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 a_start = a
                 t_phase = time.perf_counter()
                 for _ls in range(options.line_search_steps):
-                    if state.q_lo is not None and trial.q_lo is not None:
+                    if getattr(state, "q_lo", None) is not None and getattr(trial, "q_lo", None) is not None:
                         add_compensated(state.q, state.q_lo, a, delta, trial.q, trial.q_lo)
                         q_new = trial.q
                     else:       # a state without low parts (prepared elsewhere): plain coordinates

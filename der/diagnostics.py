@@ -42,7 +42,7 @@ from .energies.stiffness import bending_at, twisting_at
 from .energies.stretch import _stretch_local, elongations
 from .energies.twist import _twist_local, material_twist
 from .geometry import (
-    curvature_binormals, edge_frames, frenet_directors, material_frames, signed_angle, tangents,
+    curvature_binormals, edge_array, edge_frames, frenet_directors, material_frames, signed_angle, tangents,
 )
 from .rod import Rod, RodState, check_state
 
@@ -451,10 +451,11 @@ def _edge_forces(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_e
     g8 = np.empty(8)
     H8 = np.empty((8, 8))
     work = np.empty((5, 8))
-    ed = edge_frames(q, edge_nodes, d1)
+    E = edge_array(q, edge_nodes)
+    ed = edge_frames(q, edge_nodes, d1, E)
     if has_stretch:
         for j in range(n):
-            _stretch_local(q, edge_nodes, j, l_bar[j], k_stretch[j], lam[j], 1, g6, H6)
+            _stretch_local(E, j, l_bar[j], k_stretch[j], lam[j], 1, g6, H6)
             for i in range(3):
                 F[j, i] += g6[3 + i]   # dE/de = dE/dx_b
     for v in range(vertex_nodes.shape[0]):

@@ -453,6 +453,9 @@ class RodState:
     lam : (n_edges,) tension multipliers of an inextensible rod (force); zeros otherwise.
     penalty : (n_edges,) the axial penalty the solver used with ``lam`` (force/length), or None. The tension of
         edge j is ``lam_j + penalty_j g_j`` (g the elongation); ``der.diagnostics`` uses it.
+    q_lo : (n_dof,) or None: the low parts of compensated coordinates, ``x = q + q_lo`` with |q_lo| <= ulp(q)/2
+        (the solvers keep them, so that the state resolves a deformation far below the rounding of coordinates
+        of size L; ``q`` alone is the state rounded to double precision). None means zero.
 
     Node positions and angles are views (``positions``, ``theta``); a state belongs to one rod (same sizes).
     Get one from ``Rod.rest_state()`` or ``der.solve(...).state``.
@@ -474,6 +477,7 @@ class RodState:
     reference_twist: np.ndarray
     lam: np.ndarray = field(default_factory=lambda: np.zeros(0))
     penalty: np.ndarray | None = None
+    q_lo: np.ndarray | None = None
 
     def __repr__(self):
         n_edges = self.d1.shape[0]
@@ -485,7 +489,8 @@ class RodState:
     def copy(self):
         """An independent copy (all arrays copied)."""
         return RodState(self.q.copy(), self.d1.copy(), self.tangents.copy(), self.reference_twist.copy(),
-                        self.lam.copy(), None if self.penalty is None else self.penalty.copy())
+                        self.lam.copy(), None if self.penalty is None else self.penalty.copy(),
+                        None if self.q_lo is None else self.q_lo.copy())
 
     @property
     def positions(self):
@@ -504,6 +509,13 @@ class RodState:
         self.tangents[:] = other.tangents
         self.reference_twist[:] = other.reference_twist
         self.lam[:] = other.lam
+        if other.q_lo is None:
+            if self.q_lo is not None:
+                self.q_lo[:] = 0.0
+        elif self.q_lo is None:
+            self.q_lo = other.q_lo.copy()
+        else:
+            self.q_lo[:] = other.q_lo
 
 
 # ---------------------------------------------------------------------------------------------

@@ -38,6 +38,7 @@ def _dispatchers():
 # calls inlined into it (numba's cache index tracks only a kernel's own source file, so an inlined callee's
 # stale index means nothing: it is never loaded on its own)
 ENTRY_KERNELS = (("der.scene", "evaluate"), ("der.geometry", "transport_frames"), ("der.geometry", "edge_frames"),
+                 ("der.geometry", "edge_array"), ("der.geometry", "add_compensated"),
                  ("der.diagnostics", "_edge_forces"), ("der.solvers.explicit", "_fire_run"))
 
 

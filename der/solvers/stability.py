@@ -225,13 +225,16 @@ def _m_orthonormal(V, m):
 
     V = V / np.sqrt(np.einsum("ij,i,ij->j", V, m, V))[None, :]
     _, R, piv = la.qr(V * np.sqrt(m)[:, None], mode="economic", pivoting=True)
-    # symmetry modes are either independent (|R_kk| ~ |R_00|) or dependent up to round-off in the state; the
-    # Cholesky factor of the Gram matrix below fails from |R_kk| ~ 1e-8 |R_00| (condition 1e16), so cut at 1e-6
+    # symmetry modes are either independent (|R_kk| ~ |R_00|) or dependent up to round-off in the state: cut at 1e-6
     rank = int(np.sum(np.abs(np.diag(R)) > 1e-6 * abs(R[0, 0])))
-    # M-orthonormalise the independent columns through V itself (massless DOFs keep their part of the mode)
+    # M-orthonormalise the independent columns through V itself (massless DOFs keep their part of the mode).
+    # By the eigenvectors of their Gram matrix rather than its Cholesky factor: two modes that coincide to 1e-9
+    # (a ring round to round-off, whose material sliding is a rotation about its axis) may pass the rank test
+    # and leave a Gram matrix that Cholesky refuses ("not positive definite", loop_twist --locate)
     Vk = V[:, np.sort(piv[:rank])]
-    Lc = np.linalg.cholesky(Vk.T @ (m[:, None] * Vk))
-    return np.linalg.solve(Lc, Vk.T).T
+    w, U = np.linalg.eigh(Vk.T @ (m[:, None] * Vk))
+    keep = w > 1e-12 * w.max()
+    return (Vk @ U[:, keep]) / np.sqrt(w[keep])[None, :]
 
 
 # ---------------------------------------------------------------------------------------------

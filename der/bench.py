@@ -166,7 +166,7 @@ class DerSolver:
             out = [c for c in constraints if c is not None]
             for end, motion in driven:
                 d, R = motion.pose(t)
-                slide = () if motion.slides_along is None else (tuple(motion.axis),)
+                slide = () if motion.slides_along is None else tuple(float(c) for c in motion.axis)
                 out.append(der.clamp(end.value, rotation=R, position=centres[end] + d, slide=slide))
             return out
 

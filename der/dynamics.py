@@ -269,6 +269,51 @@ def add_drag(q, v, edge_nodes, weights, xi_n, xi_t, closed, f, ab, scale, kl, ku
     return power
 
 
+@njit(cache=True)
+def add_friction(q1, q0, normals, normal_force, mu, eps_v, dt, f, ab, kl, ku, perm):
+    """Lagged smoothed Coulomb friction (IPC, Li et al. 2020, section 5) on every node k with a normal force:
+    u = P_k (x1_k - x0_k) / dt the tangential velocity over the step (P_k = I - n_k n_k^T, n_k and N_k lagged
+    from the start of the step), f_k = -mu N_k f1(|u|) u / |u| with f1(y) = 2 y / eps - y^2 / eps^2 below the
+    slip velocity eps and 1 above it: Coulomb's law |f| <= mu N, sticking where |u| << eps. Adds f to ``f`` and,
+    with ``ab`` non-empty, its exact Jacobian -df/dx1 (positive semi-definite: f1 is increasing) to the band. Returns the energy
+    it dissipates over the step, -f . (x1 - x0) >= 0."""
+    n_nodes = normal_force.shape[0]
+    off = kl + ku
+    lost = 0.0
+    for k in range(n_nodes):
+        N = normal_force[k]
+        if N <= 0.0:
+            continue
+        d = np.empty(3)
+        for a in range(3):
+            d[a] = (q1[4 * k + a] - q0[4 * k + a]) / dt
+        dn = d[0] * normals[k, 0] + d[1] * normals[k, 1] + d[2] * normals[k, 2]
+        u = np.empty(3)
+        for a in range(3):
+            u[a] = d[a] - dn * normals[k, a]
+        y = np.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
+        if y < eps_v:
+            ratio = 2.0 / eps_v - y / (eps_v * eps_v)        # f1(y) / y
+            slope = 2.0 / eps_v - 2.0 * y / (eps_v * eps_v)  # f1'(y)
+        else:
+            ratio = 1.0 / y
+            slope = 0.0
+        c = mu * N * ratio
+        for a in range(3):
+            f[4 * k + a] -= c * u[a]
+            lost += c * u[a] * d[a] * dt
+        if ab.shape[0] > 0:
+            for a in range(3):
+                i = 4 * k + a
+                for b in range(3):
+                    j = 4 * k + b
+                    p = (1.0 if a == b else 0.0) - normals[k, a] * normals[k, b]
+                    uu = u[a] * u[b] / (y * y) if y > 0.0 else 0.0
+                    # exact: d f / d x1 = -(mu N / dt) [ratio (P - uu) + f1'(y) uu]: PSD since f1' >= 0
+                    ab[off + perm[i] - perm[j], perm[j]] += mu * N * (ratio * (p - uu) + slope * uu) / dt
+    return lost
+
+
 # ---------------------------------------------------------------------------------------------- driver
 
 class _Model:
@@ -370,7 +415,8 @@ def _gravity(gravity):
 
 def simulate(scene, t_end, dt=None, integrator="newmark", state=None, velocity=None, damping=None, gravity=None,
              loads=None, supports=None, rho_J=None, save_every=1, callback=None, record=None, progress=None,
-             newton_tol=1e-10, strain_tol=1e-9, max_steps=10_000_000, time_budget=math.inf, rho_inf=None):
+             newton_tol=1e-10, strain_tol=1e-9, max_steps=10_000_000, time_budget=math.inf, rho_inf=None,
+             friction=0.0, slip_velocity=None):
     """Integrate the rod's motion in physical time from t = 0 to ``t_end``.
 
     Parameters
@@ -403,6 +449,13 @@ def simulate(scene, t_end, dt=None, integrator="newmark", state=None, velocity=N
     newton_tol : Newton converges when the largest node correction is below newton_tol times the edge length
         (and the largest angle correction below newton_tol radians).
     strain_tol : largest |strain| an inextensible rod may keep at the end of a step.
+    friction : float >= 0
+        Coulomb coefficient mu at the scene's obstacle contacts (``contacts=[der.cylinder(...)]``, "newmark"):
+        lagged smoothed friction as in IPC -- the normal force and contact normal of each node from the barrier
+        at the start of the step, a friction force -mu N f1(|u|) u / |u| on its tangential velocity u over the
+        step, f1 rising smoothly from 0 to 1 over the slip velocity.
+    slip_velocity : float > 0, optional: the smoothing velocity eps_v (default 1e-3 edge lengths per step:
+        h / (1000 dt)); a sticking contact creeps at most at about this speed.
     rho_inf : float in [0, 1], "newmark" only: the spectral radius at infinite frequency of the generalized-alpha
         method (Chung & Hulbert 1993, in the form of Arnold & Bruls 2007 with forces at the end of the step).
         1 is Newmark's average-acceleration (trapezoidal) rule: no numerical dissipation (the default for an
@@ -470,9 +523,22 @@ def simulate(scene, t_end, dt=None, integrator="newmark", state=None, velocity=N
         raise ValueError(f"der.simulate: rho_inf must be in [0, 1] (1: no numerical dissipation); got {rho_inf!r}")
     newton_tol = validate.positive_number(newton_tol, "der.simulate: newton_tol", "a finite number > 0")
     strain_tol = validate.positive_number(strain_tol, "der.simulate: strain_tol", "a finite number > 0")
-    if scene.contacts:
-        raise ValueError("der.simulate: contact terms are not supported in dynamics yet (issue 15, left undone); "
-                         "use der.solve for contact")
+    from .terms.obstacles import Obstacle
+
+    for term in scene.contacts:
+        if not isinstance(term, Obstacle):
+            raise ValueError("der.simulate: contacts: only obstacles (der.plane, der.sphere, der.cylinder) in dynamics "
+                             f"so far; self-contact ({type(term).__name__}) needs the sparse solve (use der.solve)")
+    friction = validate.real_number(friction, "der.simulate: friction", "a Coulomb coefficient >= 0")
+    if not friction >= 0:
+        raise ValueError(f"der.simulate: friction must be a Coulomb coefficient >= 0; got {friction!r}")
+    if friction > 0 and not scene.contacts:
+        raise ValueError("der.simulate: friction > 0 needs obstacle contacts in the scene (contacts=[...])")
+    if friction > 0 and integrator != "newmark":
+        raise ValueError("der.simulate: friction needs integrator='newmark'")
+    if slip_velocity is not None:
+        slip_velocity = validate.positive_number(slip_velocity, "der.simulate: slip_velocity",
+                                                 "a finite velocity > 0")
     if state is None:
         state = rod.rest_state()
     elif state.q.shape != (rod.n_dof,):
@@ -498,9 +564,19 @@ def simulate(scene, t_end, dt=None, integrator="newmark", state=None, velocity=N
     system.mass_full = mass.copy()
     work = prepare_state(system, state)       # targets of t = 0 applied; links and condensed mass from `mass`
     update_links(system, work)
+    if system.terms:
+        from .terms import warmup as _contact_warmup
+
+        compile_time += _contact_warmup()
+        for term in system.terms:
+            term.check_start(work)
+        for term in system.terms:
+            term.start_stiffness(work, system)
     model = _Model(scene, system, mass, damping, g, loads, supports)
     if integrator == "newmark":
         runner = _NewmarkRun(model, work, v0, dt, newton_tol, strain_tol, rho_inf)
+        runner.friction = friction
+        runner.slip_velocity = slip_velocity
     else:
         runner = _VerletRun(model, work, v0, dt, strain_tol)
     dt = runner.dt
@@ -566,6 +642,7 @@ def simulate(scene, t_end, dt=None, integrator="newmark", state=None, velocity=N
 
 
 _DYNAMICS_COMPILED = False
+_DEBUG = False
 
 
 def _compile_dynamics():
@@ -580,6 +657,8 @@ def _compile_dynamics():
     en = np.array([[0, 1], [1, 2]], dtype=np.int64)
     add_drag(q, np.zeros(12), en, np.ones(3), 1.0, 1.0, False, np.zeros(12), np.zeros((0, 0)), 0.0, 1, 1,
              np.arange(12, dtype=np.int64))
+    add_friction(q, q, np.zeros((3, 3)), np.zeros(3), 0.1, 1.0, 1.0, np.zeros(12), np.zeros((0, 0)), 1, 1,
+                 np.arange(12, dtype=np.int64))
     _DYNAMICS_COMPILED = True
     return time.perf_counter() - t0
 
@@ -663,10 +742,15 @@ class _Run:
 
         e = energy_terms(self.system, self.state)
         elastic = sum(v for k, v in e.items() if k != "contact")
+        contact = e.get("contact", 0.0)
         kinetic = 0.5 * float(self.model.mass @ (self.v * self.v))
         grav = -float(self.model.f_gravity @ self.state.q)
-        return {"kinetic": kinetic, "elastic": elastic, "gravity": grav, "work": self.work,
-                "dissipated": self.dissipated, "total": kinetic + elastic + grav - self.work + self.dissipated}
+        out = {"kinetic": kinetic, "elastic": elastic, "gravity": grav, "work": self.work,
+               "dissipated": self.dissipated,
+               "total": kinetic + elastic + contact + grav - self.work + self.dissipated}
+        if self.system.terms:
+            out["contact"] = contact
+        return out
 
     def _load_force(self):
         """The applied generalized force (loads; supports' reactions count through the held DOFs' motion)."""
@@ -762,6 +846,10 @@ class _NewmarkRun(_Run):
             from .constraints import enforce_links
 
             enforce_links(q_pred, sysm.links)
+        if sysm.terms:                              # contact: the predictor may not cross an obstacle either
+            step = q_pred - s0.q
+            a = min([1.0] + [t.max_step(s0, step) for t in sysm.terms])
+            q_pred = s0.q + 0.5 * a * step
         trial = s0.copy()
         if not transport(sysm, s0, q_pred, trial):
             return False, ("newton_failed", f"the predictor reversed an edge at t = {t1:g}; reduce dt")
@@ -781,11 +869,15 @@ class _NewmarkRun(_Run):
         else:
             kfac = 1.0
         work = np.empty_like(sysm.ab)
+        fric = self._lagged_contact(s0) if getattr(self, "friction", 0.0) > 0 else None
         for update in range(MAX_MULTIPLIER_UPDATES + 1):
             converged = False
             for it in range(MAX_NEWTON):
                 v1, a1, acc1 = self._kinematics(trial.q - s0.q, v0, a0, acc0)
                 F, _, power = model.forces(trial, v1, 2, dvel)
+                if fric is not None:
+                    add_friction(trial.q, s0.q, fric[0], fric[1], self.friction, fric[2], dt, F, sysm.ab,
+                                 sysm.kl, sysm.ku, sysm.perm)
                 R_full = F - model.mass * acc1
                 sysm.fext[:] = R_full            # residual_vector reads fext - grad
                 sysm.grad[:] = 0.0
@@ -803,12 +895,21 @@ class _NewmarkRun(_Run):
                 big = float(np.abs(delta.reshape(-1, 4)[:, :3]).max()) / self.h
                 if big > 0.25:                      # a Newton correction of more than a quarter edge: damped
                     delta *= 0.25 / big
+                if sysm.terms:                      # contact: no step through an obstacle (CCD)
+                    a = min([1.0] + [t.max_step(trial, delta) for t in sysm.terms])
+                    if not a > 0.0:
+                        return False, ("newton_failed", f"no admissible step at the obstacle at t = {t1:g}")
+                    delta *= a
                 q_new = trial.q + delta
                 if not transport(sysm, s0, q_new, trial):
                     return False, ("newton_failed", f"a Newton step reversed an edge at t = {t1:g}; reduce dt")
                 d = delta.reshape(-1, 4)
                 dx = float(np.abs(d[:, :3]).max())
                 dth = float(np.abs(d[:, 3]).max())
+                for term in sysm.terms:             # near the solution: the exact (unprojected) barrier Hessian
+                    term.project = dx > 1e-4 * self.h
+                if _DEBUG:
+                    print(t1, update, it, dx, dth)
                 if dx <= self.xtol and dth <= self.newton_tol:
                     converged = True
                     break
@@ -833,6 +934,11 @@ class _NewmarkRun(_Run):
         acc1[self.held] = 0.0
         F, _, power = model.forces(trial, v1, 1)
         F_load = self._load_force()
+        if fric is not None:
+            self.dissipated += add_friction(trial.q, s0.q, fric[0], fric[1], self.friction, fric[2], dt,
+                                            np.zeros_like(F), np.zeros((0, 0)), sysm.kl, sysm.ku, sysm.perm)
+        for term in sysm.terms:
+            term.after_step(trial)              # IPC's adaptive barrier stiffness
         # work of the loads (trapezoidal) and of the supports (reaction power), damping dissipation
         self.work += 0.5 * float((self.F_load + F_load) @ dq)
         if self.held.any():
@@ -848,6 +954,23 @@ class _NewmarkRun(_Run):
         self.state = trial
         self.v, self.a, self.acc = v1, a1, acc1
         return True, None
+
+    def _lagged_contact(self, state):
+        """(normals (n_nodes, 3), normal forces (n_nodes,), eps_v): each node's barrier force at ``state``, the
+        lagged normal force and direction of the friction law."""
+        from .solvers.system import evaluate_system
+
+        sysm, rod = self.system, self.rod
+        g = np.zeros(rod.n_dof)
+        evaluate_system(sysm, state, 1)                 # sets each term's active set at this state
+        for term in sysm.terms:
+            term.evaluate(state, 1, g, sysm.ab, [])
+        f = -g.reshape(-1, 4)[:, :3]
+        N = np.linalg.norm(f, axis=1)
+        normals = np.divide(f, N[:, None], out=np.zeros_like(f), where=N[:, None] > 0)
+        N[self.system.fixed.reshape(-1, 4)[:, :3].all(axis=1)] = 0.0
+        eps = self.slip_velocity if self.slip_velocity is not None else 1e-3 * float(rod.l_bar.mean()) / self.dt
+        return np.ascontiguousarray(normals), N, eps
 
     def _kinematics(self, dq, v0, a0, acc0):
         """(v1, a1, qdd1) of the step dq = q1 - q0 (generalized-alpha update formulas)."""

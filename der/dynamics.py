@@ -642,7 +642,6 @@ def simulate(scene, t_end, dt=None, integrator="newmark", state=None, velocity=N
 
 
 _DYNAMICS_COMPILED = False
-_DEBUG = False
 
 
 def _compile_dynamics():
@@ -872,6 +871,7 @@ class _NewmarkRun(_Run):
         fric = self._lagged_contact(s0) if getattr(self, "friction", 0.0) > 0 else None
         for update in range(MAX_MULTIPLIER_UPDATES + 1):
             converged = False
+            cut = 0
             for it in range(MAX_NEWTON):
                 v1, a1, acc1 = self._kinematics(trial.q - s0.q, v0, a0, acc0)
                 F, _, power = model.forces(trial, v1, 2, dvel)
@@ -895,11 +895,21 @@ class _NewmarkRun(_Run):
                 big = float(np.abs(delta.reshape(-1, 4)[:, :3]).max()) / self.h
                 if big > 0.25:                      # a Newton correction of more than a quarter edge: damped
                     delta *= 0.25 / big
+                a = 1.0
                 if sysm.terms:                      # contact: no step through an obstacle (CCD)
                     a = min([1.0] + [t.max_step(trial, delta) for t in sysm.terms])
                     if not a > 0.0:
                         return False, ("newton_failed", f"no admissible step at the obstacle at t = {t1:g}")
                     delta *= a
+                    cut = cut + 1 if a < 1.0 else 0
+                    if cut >= 3:
+                        # Newton keeps running into the obstacle: the barrier is too soft for the contact force
+                        # (IPC's remedy: double its stiffness, up to kappa_max)
+                        for term in sysm.terms:
+                            if term.adaptive and term.kappa < term.kappa_max:
+                                term.kappa = min(2.0 * term.kappa, term.kappa_max)
+                                term.kappa_updates += 1
+                        cut = 0
                 q_new = trial.q + delta
                 if not transport(sysm, s0, q_new, trial):
                     return False, ("newton_failed", f"a Newton step reversed an edge at t = {t1:g}; reduce dt")
@@ -908,8 +918,6 @@ class _NewmarkRun(_Run):
                 dth = float(np.abs(d[:, 3]).max())
                 for term in sysm.terms:             # near the solution: the exact (unprojected) barrier Hessian
                     term.project = dx > 1e-4 * self.h
-                if _DEBUG:
-                    print(t1, update, it, dx, dth)
                 if dx <= self.xtol and dth <= self.newton_tol:
                     converged = True
                     break

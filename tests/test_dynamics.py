@@ -274,3 +274,61 @@ def test_bad_arguments_are_refused_by_name(kwargs, name):
         der.simulate(cantilever(4), **args)
     with pytest.raises(ValueError, match="translational"):
         der.Damping(translational=-1.0)
+
+
+def _rod_on_plane(normal, mu, v0=0.0, g=9.81):
+    """A straight rod (r = 0.01) resting on a plane through the origin with ``normal``, in contact equilibrium
+    under gravity (der.solve), then released with velocity v0 along its axis."""
+    n = np.asarray(normal, float) / np.linalg.norm(normal)
+    axis = np.cross([0.0, 1.0, 0.0], n)             # down the slope (in the x-z plane), along the rod
+    r = 0.01
+    rod = der.rod_from_shape(der.shapes.straight(0.5, 16, axis=tuple(axis), director=(0, 1, 0)), A1=1e-3, A2=1e-3,
+                             EA=1e3, rho_A=0.1, rho_J=1e-5)
+    plane = der.plane([0, 0, 0], n, radius=r)
+    start = rod.displaced(rod.rest_state(), np.tile((r + 0.05 * r) * n, (rod.n_nodes, 1)))
+    # the contact equilibrium under the weight's normal component (the tangential one is what friction holds)
+    weight = np.array([0.0, 0.0, -rod.rho_A * g])
+    settle = der.solve(der.Scene(rod, loads=[der.distributed_force((weight @ n) * n)], contacts=[plane]),
+                       state=start)
+    v = np.zeros((rod.n_nodes, 3))
+    v[:] = v0 * axis
+    return rod, der.Scene(rod, contacts=[plane]), settle.state, v, axis
+
+
+def test_coulomb_friction_decelerates_a_sliding_rod_at_mu_g_and_sticks():
+    """A rod sliding along a level floor: friction -mu N decelerates it at mu g (closed form) until it stops at
+    v0^2 / (2 mu g); then it sticks (creep far below the slip velocity)."""
+    mu, g, v0 = 0.5, 9.81, 1.0
+    rod, scene, start, v, axis = _rod_on_plane([0, 0, 1], mu, v0, g)
+    traj = der.simulate(scene, 0.3, dt=1e-3, state=start, velocity=v, gravity=[0, 0, -g], friction=mu,
+                        save_every=10, progress=False)
+    assert traj.completed
+    vx = traj.velocities.reshape(len(traj.times), -1, 4)[:, :, :3].mean(axis=1) @ axis
+    t = traj.times
+    sliding = (t > 0.02) & (t < 0.18)
+    decel = -np.polyfit(t[sliding], vx[sliding], 1)[0]
+    assert decel == pytest.approx(mu * g, rel=5e-3)
+    travelled = (traj.positions[-1] - traj.positions[0]).mean(axis=0) @ axis
+    assert travelled == pytest.approx(v0 ** 2 / (2 * mu * g), rel=1e-2)
+    assert np.abs(vx[t > 0.23]).max() < 1e-4             # stuck (the slip velocity is 0.03 here)
+    assert np.all(np.diff(traj.energies["kinetic"][t > 0.02][:15]) < 0)
+
+
+@pytest.mark.parametrize("ratio", [0.8, 1.25])
+def test_a_rod_on_an_incline_holds_below_and_slides_above_tan_alpha_equal_mu(ratio):
+    """Static and sliding friction on an incline of slope tan(alpha) = ratio * mu: it holds below mu (no motion
+    beyond creep), above it slides with a = g (sin alpha - mu cos alpha)."""
+    mu, g = 0.4, 9.81
+    alpha = np.arctan(ratio * mu)
+    rod, scene, start, v, axis = _rod_on_plane([np.sin(alpha), 0, np.cos(alpha)], mu, 0.0, g)
+    # slip velocity 1e-4: a sticking contact creeps at about f1^-1(ratio) of it, and a sliding one reaches full
+    # Coulomb friction once faster than it (the default, a thousandth of an edge per step, is 0.03 here)
+    traj = der.simulate(scene, 0.2, dt=1e-3, state=start, velocity=v, gravity=[0, 0, -g], friction=mu,
+                        slip_velocity=1e-4, save_every=10, progress=False)
+    assert traj.completed
+    s = (traj.positions - traj.positions[0]).mean(axis=1) @ axis
+    if ratio < 1:
+        assert abs(s[-1]) < 0.2 * 1e-4     # creep: 0.2 s at f1^-1(0.8) = 0.55 slip velocities
+    else:
+        a = g * (np.sin(alpha) - mu * np.cos(alpha))
+        assert s[-1] == pytest.approx(0.5 * a * 0.2 ** 2, rel=2e-2)

@@ -36,6 +36,15 @@ one home for the energies, loads, supports and frame transport); this module add
 
 Units: any consistent set (SI: m, kg, s, N). rho_A mass per length, rho_J mass * length (rotational inertia per
 length, rho * J for a cross-section of polar moment J).
+
+Example
+-------
+>>> import der
+>>> rod = der.rod_from_shape(der.shapes.straight(1.0, 20), A1=1.0, A2=1.0, EA=1e4, rho_A=1.0, rho_J=1e-4)
+>>> scene = der.Scene(rod, constraints=[der.clamp("start")])
+>>> traj = der.simulate(scene, 0.05, dt=1e-3, gravity=[1.0, 0.0, 0.0])
+>>> traj.completed
+True
 """
 import dataclasses
 import math
@@ -111,7 +120,15 @@ NO_DAMPING = Damping()
 def node_mass_weights(rod):
     """Length of material each node's lumped mass stands for (row sums of the consistent linear mass matrix
     on [0, L]; see the module docstring): l/8 on the outer nodes of an open rod, 3 l/8 + l'/2 on the first
-    inner node, (l_{j-1} + l_j)/2 elsewhere. Sums to L."""
+    inner node, (l_{j-1} + l_j)/2 elsewhere. Sums to L.
+
+    Example
+    -------
+    >>> import der
+    >>> rod = der.rod_from_shape(der.shapes.straight(1.0, 3), A1=1.0, A2=1.0)
+    >>> der.dynamics.node_mass_weights(rod)          # l = 1/2: l/8, 3 l/8 + l/2, l/2 + 3 l/8, l/8
+    array([0.0625, 0.4375, 0.4375, 0.0625])
+    """
     w = np.zeros(rod.n_nodes)
     np.add.at(w, rod.edge_nodes[:, 0], 0.5 * rod.l_bar)
     np.add.at(w, rod.edge_nodes[:, 1], 0.5 * rod.l_bar)

@@ -332,3 +332,24 @@ def test_a_rod_on_an_incline_holds_below_and_slides_above_tan_alpha_equal_mu(rat
     else:
         a = g * (np.sin(alpha) - mu * np.cos(alpha))
         assert s[-1] == pytest.approx(0.5 * a * 0.2 ** 2, rel=2e-2)
+
+
+def test_recording_on_a_sim_time_timeline(tmp_path):
+    from rerun.chunk import RrdReader
+
+    from der.recording import read_centrelines
+
+    scene = cantilever(6)
+    rod = scene.rod
+    v = np.zeros((rod.n_nodes, 3))
+    v[:, 0] = 0.1 * np.clip(rod.xi_nodes, 0, None)
+    path = tmp_path / "swing.rrd"
+    traj = der.simulate(scene, 0.1, dt=0.01, velocity=v, record=path, save_every=2, progress=False)
+    steps, x = read_centrelines(str(path))
+    assert steps == [0, 2, 4, 6, 8, 10]
+    assert np.allclose(x[-1], traj.positions[-1], atol=1e-6)          # float32 in the file
+    times = set()
+    for chunk in RrdReader(str(path)).stream().to_chunks():
+        if chunk.entity_path == "/rod/centreline":
+            times.update(chunk.to_record_batch().column("sim_time").to_pylist())
+    assert len(times) == len(traj.times)

@@ -315,6 +315,9 @@ class _Problem:
         scene = self.scene_of(float(p))
         if not isinstance(scene, Scene):
             raise TypeError(f"der.continuation: scene_of({p!r}) must return a der.Scene; got {type(scene).__name__}")
+        if scene.scenes is not None:
+            raise ValueError(f"der.continuation: scene_of({p!r}) is a scene of several rods; the continuation follows "
+                             "one rod (continue each rod alone, or step der.solve along the parameter)")
         if self.n is None:
             rod = scene.rod
             self.n = rod.n_dof

@@ -38,6 +38,7 @@ import numpy as np
 from numba import njit
 
 from .energies.bend import _bend_local, material_curvatures
+from .energies.stiffness import bending_at, twisting_at
 from .energies.stretch import _stretch_local, elongations
 from .energies.twist import _twist_local, material_twist
 from .geometry import (
@@ -355,7 +356,8 @@ def _vertex_frames(rod, state):
 
 def internal_moments(rod, state):
     """Internal moment vectors at the vertices (force * length), global frame: the discrete constitutive
-    law A1 (kappa - kappa_bar) + A2 (twist - twist_bar) t (paper Eq. 28 in the continuum limit).
+    law A1 (kappa - kappa_bar) + A2 (twist - twist_bar) t (paper Eq. 28 in the continuum limit); with anisotropic
+    bending, A1 (kappa1 - kappa1_bar) m2 - A1' (kappa2 - kappa2_bar) m1 for the bending part.
 
     Parameters
     ----------
@@ -391,10 +393,19 @@ def internal_moments(rod, state):
     # each edge side's moment A1 [(k1 - k1_bar) m2 - (k2 - k2_bar) m1] / D in its own frame, averaged (the two
     # sides share the cell); its small component along the vertex tangent is dropped: the bending moment is
     # transverse, the twisting moment is the one along t
-    Mb = 0.5 * ((r[:, 0, :1] * m2[e] - r[:, 0, 1:] * m1[e]) + (r[:, 1, :1] * m2f - r[:, 1, 1:] * m1f))
-    Mb -= np.einsum("ij,ij->i", Mb, tv)[:, None] * tv
     D = rod.voronoi[:, None]
-    return rod.A1 * Mb / D + rod.A2 * (m - rod.twist_bar)[:, None] / D * tv
+    A2 = rod.A2 if np.ndim(rod.A2) == 0 else np.asarray(rod.A2)[:, None]
+    if rod.isotropic:
+        A1 = rod.A1 if np.ndim(rod.A1) == 0 else np.asarray(rod.A1)[:, None]
+        Mb = 0.5 * ((r[:, 0, :1] * m2[e] - r[:, 0, 1:] * m1[e]) + (r[:, 1, :1] * m2f - r[:, 1, 1:] * m1f))
+        Mb -= np.einsum("ij,ij->i", Mb, tv)[:, None] * tv
+        return A1 * Mb / D + A2 * (m - rod.twist_bar)[:, None] / D * tv
+    B = rod.bending_stiffness()       # (A1, A1') per vertex: kappa1 pairs with m2, kappa2 with m1
+    b1, b2 = B[:, :1], B[:, 1:]
+    Mb = 0.5 * ((b1 * r[:, 0, :1] * m2[e] - b2 * r[:, 0, 1:] * m1[e])
+                + (b1 * r[:, 1, :1] * m2f - b2 * r[:, 1, 1:] * m1f))
+    Mb -= np.einsum("ij,ij->i", Mb, tv)[:, None] * tv
+    return Mb / D + A2 * (m - rod.twist_bar)[:, None] / D * tv
 
 
 def vertex_frenet(rod, state, min_curvature=1e-8):
@@ -451,8 +462,9 @@ def _edge_forces(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_e
         b = vertex_edges[v, 1]
         m2 = 0.0
         if has_bend:
-            s = A1 / voronoi[v]
-            e = _bend_local(ed, vertex_edges, weld, v, kappa_bar, s, s, 1, g8, H8, work)
+            a1, a2 = bending_at(A1, v)
+            s = max(a1, a2) / voronoi[v]
+            e = _bend_local(ed, vertex_edges, weld, v, kappa_bar, a1 / voronoi[v], a2 / voronoi[v], 1, g8, H8, work)
             for i in range(3):
                 F[a, i] += g8[i]
                 F[b, i] += g8[3 + i]
@@ -460,7 +472,7 @@ def _edge_forces(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_e
             # two edge sides agree)
             m2 += 2.0 * e * s
         if has_twist:
-            s = A2 / voronoi[v]
+            s = twisting_at(A2, v) / voronoi[v]
             e = _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v], s, 1, g8, H8, work)
             for i in range(3):
                 F[a, i] += g8[i]
@@ -543,7 +555,8 @@ def internal_forces(rod, state, k_stretch=None, energies=("stretch", "bend", "tw
     kappa_bar = rod.natural_curvature_edges().reshape(-1, 4)
     return _edge_forces(state.q, state.d1, state.reference_twist, lam, rod.edge_nodes, rod.vertex_nodes,
                         rod.vertex_edges, rod.l_bar, np.asarray(k_stretch, float), kappa_bar, rod.twist_bar,
-                        rod.weld, rod.voronoi, rod.A1, rod.A2, "stretch" in energies, "bend" in energies,
+                        rod.weld, rod.voronoi, rod.kernel_bending(), rod.kernel_twisting(), "stretch" in energies,
+                        "bend" in energies,
                         "twist" in energies)[0]
 
 
@@ -742,7 +755,7 @@ def contact_forces(scene, state):
     ----------
     scene : der.Scene with ``contacts`` (or the solver's internal system, which keeps the barrier stiffness the
         solve adapted: ``result.contact`` is this at the final state).
-    state : der.RodState
+    state : der.RodState (for a scene of several rods: ``result.state``, or one RodState per rod)
 
     Returns
     -------
@@ -770,9 +783,21 @@ def contact_forces(scene, state):
 
         if not scene.contacts:
             return {"n_contacts": 0, "min_distance": float("inf"), "total_force": 0.0, "terms": []}
-        check_state(scene.rod, state, "der.diagnostics.contact_forces")
-        system = build_system(scene, SolverOptions())
-        state = prepare_state(system, state)
+        if scene.scenes is not None:          # several rods: state is a MultiState or one RodState per rod
+            from .solvers.multi import MultiState, build_multi_system, prepare_multi_state
+
+            states = list(state.rods) if isinstance(state, MultiState) else list(state)
+            if len(states) != len(scene.scenes):
+                raise ValueError(f"der.diagnostics.contact_forces: give one state per rod ({len(scene.scenes)}); "
+                                 f"got {len(states)}")
+            for i, (r, s) in enumerate(zip(scene.rods, states)):
+                check_state(r, s, f"der.diagnostics.contact_forces: state of rod {i}")
+            system = build_multi_system(scene, SolverOptions())
+            state = prepare_multi_state(system, MultiState(states))
+        else:
+            check_state(scene.rod, state, "der.diagnostics.contact_forces")
+            system = build_system(scene, SolverOptions())
+            state = prepare_state(system, state)
         for t in system.terms:
             t.start_stiffness(state, system)
     terms = [t.diagnostics(state) for t in system.terms]

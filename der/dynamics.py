@@ -507,6 +507,9 @@ def simulate(scene, t_end, dt=None, integrator="newmark", state=None, velocity=N
 
     if not isinstance(scene, Scene):
         raise ValueError(f"der.simulate: scene must be a der.Scene; got {type(scene).__name__}")
+    if getattr(scene, "scenes", None) is not None:
+        raise ValueError("der.simulate: scene: a scene of several rods is not supported in dynamics yet; simulate "
+                         "one rod per scene")
     rod = scene.rod
     t_end = validate.positive_number(t_end, "der.simulate: t_end", "a finite time > 0")
     if integrator not in INTEGRATORS:

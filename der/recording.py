@@ -156,9 +156,14 @@ class Recorder:
             self.last_flush = time.perf_counter()
 
     def _write(self, seq, state, residual, energies, elapsed, final):
-        rod, rr, rec = self.rod, self.rr, self.rec
-        rec.set_time("iteration", sequence=seq)
-        rec.set_time("solve_time", duration=elapsed)
+        self.rec.set_time("iteration", sequence=seq)
+        self.rec.set_time("solve_time", duration=elapsed)
+        self._write_rod(self.rod, state, "rod")
+        self._write_scalars(state, residual, energies, final)
+
+    def _write_rod(self, rod, state, entity):
+        """The centreline (coloured), material vectors m1 and end frames of one rod under ``entity``."""
+        rr, rec = self.rr, self.rec
         x = state.positions
         if self.color_by == "alpha":
             values = dg.alpha(rod, state)
@@ -169,18 +174,23 @@ class Recorder:
             np.add.at(values, rod.vertex_edges[:, 0], 0.5 * tw)
             np.add.at(values, rod.vertex_edges[:, 1], 0.5 * tw)
             scale = np.nanmax(np.abs(values)) if values.size else 1.0
-        rec.log("rod/centreline", rr.LineStrips3D(self._strips(x), colors=_diverging(values, scale)))
+        strips = np.stack([x[rod.edge_nodes[:, 0]], x[rod.edge_nodes[:, 1]]], axis=1)
+        rec.log(f"{entity}/centreline", rr.LineStrips3D(strips, colors=_diverging(values, scale)))
         t = tangents(state.q, rod.edge_nodes)
         m1, m2 = material_frames(state.q, t, state.d1)
         mid = 0.5 * (x[rod.edge_nodes[:, 0]] + x[rod.edge_nodes[:, 1]])
         sel = slice(None, None, self.stride)
-        rec.log("rod/m1", rr.Arrows3D(origins=mid[sel], vectors=self.arrow_length * m1[sel],
+        rec.log(f"{entity}/m1", rr.Arrows3D(origins=mid[sel], vectors=self.arrow_length * m1[sel],
                                       colors=[[40, 180, 40]]))
         L = 2 * self.arrow_length
-        for name, j in (("rod/start_frame", 0), ("rod/end_frame", rod.n_edges - 1)):
+        for name, j in ((f"{entity}/start_frame", 0), (f"{entity}/end_frame", rod.n_edges - 1)):
             rec.log(name, rr.Arrows3D(origins=np.repeat(mid[j:j + 1], 3, axis=0),
                                       vectors=L * np.stack([t[j], m1[j], m2[j]]),
                                       colors=[[230, 40, 40], [40, 200, 40], [40, 80, 230]]))
+
+    def _write_scalars(self, state, residual, energies, final):
+        """Energies, residual and (rings) Lk, Tw, Wr of a frame."""
+        rod, rr, rec = self.rod, self.rr, self.rec
         for term, value in energies.items():
             rec.log(f"energy/{term}", rr.Scalars(float(value)))
         if np.isfinite(residual) and residual > 0:
@@ -259,13 +269,44 @@ class Recorder:
         self.close()
 
 
-def read_centrelines(path):
-    """(iterations, positions list) of ``rod/centreline`` in a recording (float32 from the file)."""
+class MultiRecorder(Recorder):
+    """A Recorder for a scene of several rods: rod i is written under ``rod{i}/`` (centreline, m1, end frames,
+    rest shape under ``rest{i}/``), with the scene's energies, residual and contact as for one rod."""
+
+    def __init__(self, path, rods, scene=None, **kwargs):
+        self.rods = tuple(rods)
+        # the base class sizes arrows and picks the blueprint from one rod: the longest
+        super().__init__(path, max(self.rods, key=lambda r: r.length), scene=scene, **kwargs)
+        self.strides = [max(1, int(np.ceil(r.n_edges / 200))) for r in self.rods]
+
+    def log_rest(self):
+        rr = self.rr
+        for i, rod in enumerate(self.rods):
+            x = rod.rest_state().positions
+            strips = np.stack([x[rod.edge_nodes[:, 0]], x[rod.edge_nodes[:, 1]]], axis=1)
+            self.rec.log(f"rest{i}/centreline", rr.LineStrips3D(strips, colors=[[150, 150, 150]]), static=True)
+
+    def _write(self, seq, state, residual, energies, elapsed, final):
+        self.rec.set_time("iteration", sequence=seq)
+        self.rec.set_time("solve_time", duration=elapsed)
+        for i, (rod, s) in enumerate(zip(self.rods, state.rods)):
+            self.stride = self.strides[i]
+            self._write_rod(rod, s, f"rod{i}")
+        rr = self.rr
+        for term, value in energies.items():
+            self.rec.log(f"energy/{term}", rr.Scalars(float(value)))
+        if np.isfinite(residual) and residual > 0:
+            self.rec.log("residual/log10", rr.Scalars(float(np.log10(residual))))
+
+
+def read_centrelines(path, entity="rod"):
+    """(iterations, positions list) of ``<entity>/centreline`` in a recording (float32 from the file); a scene of
+    several rods writes rod i as ``rod{i}``."""
     from rerun.chunk import RrdReader
 
     out = []
     for chunk in RrdReader(path).stream().to_chunks():
-        if chunk.entity_path != "/rod/centreline":
+        if chunk.entity_path != f"/{entity}/centreline":
             continue
         rb = chunk.to_record_batch()
         its = rb.column("iteration").to_pylist()

@@ -36,7 +36,11 @@ class Scene:
 
     Parameters
     ----------
-    rod : der.Rod
+    rod : der.Rod, or a sequence of der.Scene (several rods)
+        One rod; or, for a scene of several rods, one single-rod ``der.Scene`` per rod, each with its own energies,
+        loads and constraints (a bare ``der.Rod`` in the list stands for ``der.Scene(rod)``). The outer scene then
+        takes only ``contacts``: ``der.rod_contact(r)`` (between the rods and within each), obstacles. Its DOFs
+        are the rods' concatenated (rod after rod); without a coupling term each rod solves on its own band.
     energies : tuple of str
         Any of "stretch", "bend", "twist" (default: all three).
     loads : sequence
@@ -61,6 +65,15 @@ class Scene:
     >>> result = der.solve(scene)
     >>> result.converged
     True
+
+    Several rods (``result.states[i]`` is rod i's state, ``result.rods[i]`` its energy and reactions):
+
+    >>> x_b = der.shapes.straight(1.0, 20).positions + [0.5, 0.0, 0.0]      # a second rod beside the first
+    >>> rod_b = der.rod_from_shape(der.shapes.Shape(x_b, director=[1, 0, 0]), A1=1.0, A2=1.5)
+    >>> two = der.Scene([scene, der.Scene(rod_b, constraints=[der.clamp("start")])],
+    ...                 contacts=[der.rod_contact(0.01)])
+    >>> len(der.solve(two).states)
+    2
     """
 
     rod: Rod
@@ -70,6 +83,10 @@ class Scene:
     contacts: tuple = ()
 
     def __post_init__(self):
+        object.__setattr__(self, "scenes", None)
+        if isinstance(self.rod, (list, tuple)):
+            self._init_several()
+            return
         if not isinstance(self.rod, Rod):
             raise ValueError(f"rod must be a der.Rod (see der.rod_from_shape); got {type(self.rod).__name__}")
         object.__setattr__(self, "energies", tuple(self.energies))
@@ -89,6 +106,41 @@ class Scene:
 
             for term in self.contacts:
                 check_term(term, self)
+
+    def _init_several(self):
+        """A scene of several rods: the sub-scenes in ``scenes``, ``rod`` None; checked before any work."""
+        parts = []
+        for i, part in enumerate(self.rod):
+            if isinstance(part, Rod):
+                part = Scene(part)
+            if not isinstance(part, Scene) or part.scenes is not None:
+                raise ValueError(f"der.Scene: rod {i} of the list must be a der.Rod or a single-rod der.Scene; got "
+                                 f"{type(part).__name__ if not isinstance(part, Scene) else 'a scene of several rods'}")
+            if part.contacts:
+                raise ValueError(f"der.Scene: the scene of rod {i} has contacts; give a scene of several rods its "
+                                 "contact terms on the outer scene (der.Scene([...], contacts=[der.rod_contact(r)]))")
+            parts.append(part)
+        if not parts:
+            raise ValueError("der.Scene: the list of rods is empty")
+        if tuple(self.energies) != ENERGY_TERMS or self.loads or self.constraints:
+            raise ValueError("der.Scene: a scene of several rods takes energies, loads and constraints per rod (in "
+                             "each rod's der.Scene), only contacts on the outer scene")
+        object.__setattr__(self, "scenes", tuple(parts))
+        object.__setattr__(self, "rod", None)
+        object.__setattr__(self, "energies", ())
+        object.__setattr__(self, "loads", ())
+        object.__setattr__(self, "constraints", ())
+        object.__setattr__(self, "contacts", tuple(self.contacts))
+        if self.contacts:
+            from .terms import check_term
+
+            for term in self.contacts:
+                check_term(term, self)
+
+    @property
+    def rods(self):
+        """The scene's rods: ``(rod,)`` for one rod, one per sub-scene for several."""
+        return (self.rod,) if self.scenes is None else tuple(s.rod for s in self.scenes)
 
     @property
     def fixed(self):
@@ -206,7 +258,7 @@ def make_plan(scene, k_stretch):
         "stretch" in scene.energies, "bend" in scene.energies, "twist" in scene.energies,
         rod.edge_nodes, rod.vertex_nodes, rod.vertex_edges,
         rod.l_bar, rod.voronoi, rod.natural_curvature_edges().reshape(-1, 4), rod.twist_bar, rod.weld,
-        rod.A1, rod.A2,
+        rod.kernel_bending(), rod.kernel_twisting(),   # floats for a uniform isotropic rod (energies.stiffness)
         np.array(k_stretch, dtype=float),        # a copy: the solver may raise the penalty in place
         has_nodal, nodal, has_theta, theta,
         len(t_edges) > 0, np.array(t_edges, dtype=np.int64), np.array(t_vecs, dtype=float).reshape(-1, 3),

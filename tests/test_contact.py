@@ -88,7 +88,9 @@ def test_twisted_ring_past_michell_keeps_its_linking_number_with_self_contact():
     for twist in np.linspace(0.5 * th, 2.5 * th, 9):
         rod = base.with_imposed_twist(twist)
         scene = der.Scene(rod, contacts=[der.self_contact(r)])
-        res = der.solve(scene, state=_bent(rod, state, welded, twist, 0.01), stability=False)
+        # kick the planar ring out of its plane; once its strands touch, a kick could push them into each other
+        kick = 0.01 if contacts_seen == 0 else 0.0
+        res = der.solve(scene, state=_bent(rod, state, welded, twist, kick), stability=False)
         lk, tw, wr = dg.linking_number(rod, res.state)
         assert lk == pytest.approx(twist / (2 * np.pi), abs=1e-6)
         assert res.contact["min_distance"] >= 2 * r

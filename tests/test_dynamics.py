@@ -353,3 +353,11 @@ def test_recording_on_a_sim_time_timeline(tmp_path):
         if chunk.entity_path == "/rod/centreline":
             times.update(chunk.to_record_batch().column("sim_time").to_pylist())
     assert len(times) == len(traj.times)
+
+
+def test_a_scene_of_several_rods_is_refused_by_name():
+    a, b = cantilever(4).rod, cantilever(5).rod
+    if not hasattr(der.Scene(a), "scenes"):
+        pytest.skip("this der has no scenes of several rods")
+    with pytest.raises(ValueError, match="scene"):
+        der.simulate(der.Scene([a, b]), 1.0, dt=0.1)

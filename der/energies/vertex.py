@@ -11,6 +11,7 @@ from numba import njit
 
 from ..stencils import expand_vertex_hessian, scatter_band, scatter_vertex_gradient, vertex_dofs
 from .bend import _bend_local
+from .stiffness import bending_at, twisting_at
 from .stretch import _stretch_local
 from .twist import _twist_local
 
@@ -28,9 +29,10 @@ def bend_twist_hessian(q, ed, vertex_nodes, vertex_edges, reference_twist, weld,
     e_bend = 0.0
     e_twist = 0.0
     for v in range(vertex_edges.shape[0]):
-        b = A1 / voronoi[v]
-        e_bend += _bend_local(ed, vertex_edges, weld, v, kappa_bar, b, b, 2, g8, H8, work)
-        e_twist += _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v], A2 / voronoi[v], 2, g8,
+        a1, a2 = bending_at(A1, v)
+        e_bend += _bend_local(ed, vertex_edges, weld, v, kappa_bar, a1 / voronoi[v], a2 / voronoi[v], 2, g8, H8, work)
+        e_twist += _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v],
+                                twisting_at(A2, v) / voronoi[v], 2, g8,
                                 H8, work, True)   # added onto the bending of the same vertex
         scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
                                 vertex_edges[v, 0], vertex_edges[v, 1], g8)
@@ -69,9 +71,10 @@ def stretch_bend_twist_hessian(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_
                 side[j] = s
     e_stretch = e_bend = e_twist = 0.0
     for v in range(vertex_edges.shape[0]):
-        b = A1 / voronoi[v]
-        e_bend += _bend_local(ed, vertex_edges, weld, v, kappa_bar, b, b, 2, g8, H8, work)
-        e_twist += _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v], A2 / voronoi[v], 2, g8,
+        a1, a2 = bending_at(A1, v)
+        e_bend += _bend_local(ed, vertex_edges, weld, v, kappa_bar, a1 / voronoi[v], a2 / voronoi[v], 2, g8, H8, work)
+        e_twist += _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v],
+                                twisting_at(A2, v) / voronoi[v], 2, g8,
                                 H8, work, True)
         scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
                                 vertex_edges[v, 0], vertex_edges[v, 1], g8)

@@ -87,6 +87,8 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
         options = SolverOptions(**overrides)
     elif overrides:
         options = dataclasses.replace(options, **overrides)
+    if scene.scenes is not None:
+        return _solve_several(scene, state, solver, options, record, raise_on_failure)
     rod = scene.rod
     if state is None:
         state = rod.rest_state()
@@ -97,14 +99,20 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
         raise ValueError(f"the starting state must be finite (entry {bad} of q is {state.q[bad] if bad >= 0 else '?'})")
     if record is not None and isinstance(record, (str, os.PathLike)):
         check_record_path(record, "der.solve: record")
-    if scene.contacts and solver != "implicit":
-        raise ValueError("der.solve: contact terms need the implicit solver (solver='implicit'); the explicit "
-                         "solver has no CCD-limited step yet")
+    if scene.contacts and solver != "implicit" and not (
+            len(scene.contacts) == 1 and getattr(scene.contacts[0], "explicit_ok", False)):
+        raise ValueError("der.solve: the explicit solver handles one self-contact term (der.self_contact, or "
+                         "der.rod_contact on one rod); obstacles and several contact terms need the implicit solver "
+                         "(solver='implicit')")
     compile_time = _compile_first()
     if scene.contacts:
         from ..terms import warmup as _contact_warmup
 
         compile_time += _contact_warmup()
+        if solver == "explicit":
+            from .explicit_contact import warmup as _explicit_contact_warmup
+
+            compile_time += _explicit_contact_warmup()
     system = build_system(scene, options)     # refuses loads whose scale is not a finite double
     work = prepare_state(system, state)
     if not system.terms:                      # (a contact can react to a net load)
@@ -161,6 +169,98 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
     return result
 
 
+def _solve_several(scene, state, solver, options, record, raise_on_failure):
+    """``solve`` for a scene of several rods (der/solvers/multi.py); ``state`` None or one RodState per rod."""
+    from ..rod import check_state
+    from .multi import MultiState, build_multi_system, prepare_multi_state
+
+    rods = scene.rods
+    if state is None:
+        states = [r.rest_state() for r in rods]
+    else:
+        states = list(state.rods) if isinstance(state, MultiState) else state
+        if not isinstance(states, (list, tuple)) or len(states) != len(rods):
+            raise ValueError(f"der.solve: state must be None, a MultiState or a list of {len(rods)} RodStates (one "
+                             f"per rod of the scene); got {type(state).__name__}")
+        for i, (r, s) in enumerate(zip(rods, states)):
+            check_state(r, s, f"der.solve: state of rod {i}")
+            if not (np.isfinite(s.q).all() and np.isfinite(s.d1).all() and np.isfinite(s.reference_twist).all()):
+                raise ValueError(f"der.solve: the starting state of rod {i} must be finite")
+    if record is not None and isinstance(record, (str, os.PathLike)):
+        check_record_path(record, "der.solve: record")
+    if solver != "implicit":
+        raise ValueError("der.solve: a scene of several rods needs the implicit solver (solver='implicit'); the "
+                         "explicit solver takes one rod")
+    compile_time = _compile_first()
+    if scene.contacts:
+        from ..terms import warmup as _contact_warmup
+
+        compile_time += _contact_warmup()
+    system = build_multi_system(scene, options)
+    work = prepare_multi_state(system, MultiState(states))
+    if not system.terms:
+        for i, (p, s) in enumerate(system.views(work)):
+            try:
+                check_equilibrium_exists(p, s)
+            except ValueError as exc:
+                raise ValueError(f"rod {i}: {exc}") from None
+    for term in system.terms:
+        term.check_start(work)
+    for term in system.terms:
+        term.start_stiffness(work, system)
+    recorder = None
+    if record is not None:
+        from ..recording import MultiRecorder, Recorder
+
+        recorder = record if isinstance(record, Recorder) else MultiRecorder(record, rods, scene=scene)
+        recorder.log_rest()
+    progress = Progress(solver, options.progress)
+    try:
+        from .implicit import solve_implicit
+
+        result = solve_implicit(system, work, options, progress, recorder)
+        if result.status == "converged_at_floor":
+            warnings.warn(f"{solver} solve: {result.message}", RoundoffFloorWarning, stacklevel=3)
+        if result.converged and options.stability:
+            _stability_several(system, result, options.n_eigenvalues)
+        result.compile_time = compile_time
+        result.tol = options.tol
+        result.linear_solves = dict(system.linear_solves)
+        if system.terms:
+            from ..diagnostics import contact_forces
+
+            result.contact = contact_forces(system, result.state)
+        if recorder is not None:
+            recorder.log_final(result)
+    finally:
+        if recorder is not None and recorder is not record:
+            recorder.close()
+    if not result.converged and raise_on_failure:
+        raise ConvergenceError(result)
+    return result
+
+
+def _stability_several(system, result, n_eigenvalues):
+    """Stability of a scene of several rods: without a coupling term each rod's own (``result.rods[i]``
+    gets ``stable`` and ``min_eigenvalue``; the scene is stable if every rod is); with contact terms it is not
+    computed (the barrier couples the rods) and says so."""
+    from .stability import stability
+
+    if system.terms:
+        result.stability_note = "not computed for a scene of several rods with contact terms"
+        return
+    stable, lowest = True, np.inf
+    for i, (p, s) in enumerate(system.views(result.state)):
+        one = SolveResult(state=s, converged=True, status="", residual=float("nan"), iterations=0, wall_time=0.0,
+                          message="")
+        stability(p, one, n_eigenvalues)
+        result.rods[i].update(stable=one.stable, min_eigenvalue=one.min_eigenvalue)
+        stable = stable and bool(one.stable)
+        lowest = min(lowest, one.min_eigenvalue)
+    result.stable, result.min_eigenvalue = stable, lowest
+    result.stability_note = "each rod's own stability (no coupling term)"
+
+
 def _compile_first():
     """On the first solve of a process, compile (or load from numba's cache) every kernel before any clock
     starts, announcing a compilation on stderr; returns the seconds it took (0 afterwards)."""
@@ -213,6 +313,9 @@ def check_stability(scene, state, n_eigenvalues=6):
     from ..rod import check_state
     from .stability import stability
 
+    if scene.scenes is not None:
+        raise ValueError("der.check_stability: a scene of several rods; check each rod's scene with its state "
+                         "(der.solve reports each rod's stability in result.rods when no contact couples them)")
     check_state(scene.rod, state, "der.check_stability")
     system = build_system(scene, SolverOptions())
     work = prepare_state(system, state)

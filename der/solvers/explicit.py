@@ -294,6 +294,12 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
     noise = np.zeros(rod.n_dof)
     floor = np.nan
     step_cost = None      # measured seconds per step: sizes the chunks
+    run, contact = _fire_run, None
+    if system.terms:      # contact: barrier forces and CCD-proven steps (explicit_contact.py)
+        from .explicit_contact import ContactRun
+
+        contact = ContactRun(system)
+        run = contact.run
     try:
         while True:
             passes += 1
@@ -303,10 +309,12 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
             if e_total is None:
                 energy = float(evaluate(plan, state.q, state.d1, state.reference_twist, state.lam, 1, system.grad,
                                         system.fext, system.ab, system.kl, system.ku, system.perm))
+                if contact is not None:
+                    energy += contact.energy(state)
                 e_total = energy + 0.5 * float(system.mass @ v ** 2) - work_done
             n = _chunk_steps(options, steps, step_cost, time.perf_counter() - t_start)
             t_chunk = time.perf_counter()
-            code, done, residual, dt, alpha, n_pos, e_total, work_done, rejected, dt_max = _fire_run(
+            code, done, residual, dt, alpha, n_pos, e_total, work_done, rejected, dt_max = run(
                 plan, state.q, state.d1, state.tangents, state.reference_twist, state.lam, v, system.mass,
                 fixed, inv_scale, options.tol, n, dt, dt_max, alpha, n_pos, options.fire_n_min, options.fire_f_inc,
                 options.fire_f_dec, options.fire_alpha, options.fire_f_alpha, system.kl, system.ku, system.perm,
@@ -328,6 +336,10 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
             energies.append(e_total)
             strain = max_strain(system, state) if rod.inextensible else 0.0
             evaluate_system(system, state, 1)
+            if contact is not None and any([t.after_step(state) for t in system.terms]):
+                # the adaptive barrier stiffness changed (docs/contact.md section 6): a new energy landscape
+                evaluate_system(system, state, 1)
+                e_total, best, best_step = None, np.inf, steps
             residual = residual_norm(system, residual_vector(system), load_scales(system, state))
             history.append(residual)
             if recorder is not None and passes % options.record_every == 0:
@@ -401,6 +413,9 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
     wall = time.perf_counter() - t_start
     _restore_penalty(system, state)
     how = "edge lengths held by projection; " if project else ""
+    if contact is not None:
+        how += (f"contact: {contact.rebuilds} pair-list builds, {contact.ccd_rejected} steps refused by CCD, "
+                f"barrier stiffness {contact.term.kappa:.3g}; ")
     res = final_result(system, state, status, residual=float(residual), iterations=steps, wall_time=wall,
                        message=message + f" ({how}{rejected_total} steps rejected; stiffest mode: {stiffest}, dt_max "
                        f"{dt_max:.2e})", solver="explicit", strain=strain, history=history, dt=dt,

@@ -184,6 +184,10 @@ class SolveResult:
         force per pair and per length, minimal distance, per term); None otherwise.
     linear_solves : how many Newton systems the implicit solver factorised on the banded path and on the
         sparse (contact) path.
+    states, rods : for a scene of several rods (``der.Scene([scene_a, scene_b, ...])``): ``states[i]`` is rod i's
+        final RodState (``state`` is then a ``MultiState`` holding them, ``state.rods``), ``rods[i]`` a dict with
+        its ``energy`` by term, ``reactions`` and ``load_scale``; None for one rod. ``reactions`` then lists every
+        rod's supports, each with its ``rod`` index.
     timings : seconds of ``wall_time`` by phase where the solver measures them (implicit: "assembly" -- forces,
         band Jacobian, residual and its scales --, "factorisation" -- banded LU and solve --, "line_search").
 
@@ -232,6 +236,8 @@ class SolveResult:
     contact: dict | None = None         # contact diagnostics (issue 14; None for a scene without contact)
     linear_solves: dict = field(default_factory=dict)   # implicit: {"band": count, "sparse": count}
     timings: dict = field(default_factory=dict)
+    states: list | None = None          # several rods: one RodState per rod
+    rods: list | None = None            # several rods: per rod energy, reactions, load scale
 
     def __repr__(self):
         """One short paragraph: status, residual against tol, iterations, times, stability, message."""

@@ -372,7 +372,7 @@ def _banded_lowest(system, K, idx, mass, m, V, k, symmetric, scale):
     n = idx.size
     # sigma: below zero by a small fraction of the bending scale, so that an exact (unexpected) zero mode
     # leaves K - sigma M regular; the eigenvalues nearest it are the lowest and any negative ones near zero
-    bend_scale = rod.A1 / (rod.rho_A * rod.length ** 4)
+    bend_scale = rod.bending_scale / (rod.rho_A * rod.length ** 4)
     sigma = -1e-3 * bend_scale
     ab = system.ab.copy(order="F")
     add_diagonal(ab, system.kl, system.ku, system.perm, mass, -sigma)
@@ -469,7 +469,8 @@ def stability(system, result, n_eigenvalues=6):
     if symmetric and out["method"] != "dense":
         # shift-invert finds the eigenvalues nearest sigma: count all negative ones (below the floor) by
         # inertia as a check
-        shift = -max(float(out["floors"].max()), 1e-3 * system.rod.A1 / (system.rod.rho_A * system.rod.length ** 4))
+        shift = -max(float(out["floors"].max()),
+                     1e-3 * system.rod.bending_scale / (system.rod.rho_A * system.rod.length ** 4))
         n_neg = band_negative_pivots(system.ab, system.kl, system.ku, system.perm, shift, eigen_mass(system.rod),
                                      ~_free_full(system))
         found = int(np.sum(ev.real < shift))

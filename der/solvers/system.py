@@ -51,6 +51,7 @@ class System:
     ab: np.ndarray
     links: object = NO_LINKS   # the end supports' dependents (constraints.Links): q = c + T y
     mass_full: np.ndarray = None   # lumped mass before condensation (``mass`` is T^T M T, lumped)
+    parts = None                   # a scene of several rods: a MultiSystem (multi.py) has its rods' systems here
 
     @property
     def n_dof(self):
@@ -72,7 +73,7 @@ def axial_penalty(rod, options):
     P L / EA (issue 13: with full-weight end edges the end edges carried P/2 and the bar stretched 1% short at
     n = 50)."""
     if rod.inextensible:
-        return options.inextensible_penalty * rod.A1 / rod.l_bar ** 3
+        return options.inextensible_penalty * rod.bending_scale / rod.l_bar ** 3
     k = np.broadcast_to(np.asarray(rod.EA, float), rod.l_bar.shape) / rod.l_bar
     if not rod.closed:
         k = k.copy()
@@ -87,7 +88,7 @@ def rotational_inertia(rod):
     if rod.rho_J is not None:
         return rod.rho_J
     h = rod.l_bar.mean()
-    return rod.rho_A * h * h * rod.A2 / (4.0 * rod.A1)
+    return rod.rho_A * h * h * rod.twisting_scale / (4.0 * rod.bending_scale)
 
 
 def safe_norm(v):
@@ -244,6 +245,10 @@ def evaluate_system(system, state, order):
     """Energy; fills system.grad, system.fext (and system.ab with order 2). With contact terms their energy,
     gradient and band-local Hessian blocks are added, and their off-band Hessian triplets are left in
     ``system.contact_coo`` (a list of (rows, cols, vals); empty while no pair is active)."""
+    if system.parts is not None:          # several rods (multi.py)
+        from . import multi
+
+        return multi.evaluate_system(system, state, order)
     energy = evaluate(system.plan, state.q, state.d1, state.reference_twist, state.lam, order, system.grad,
                       system.fext, system.ab, system.kl, system.ku, system.perm)
     if system.terms:
@@ -261,10 +266,14 @@ def contact_force_scale(system):
 
 def load_scales(system, state):
     """(F_s, M_s): force and moment scales of the residual (see module docstring)."""
+    if system.parts is not None:          # several rods (multi.py)
+        from . import multi
+
+        return multi.load_scales(system, state)
     rod, plan = system.rod, system.plan
     F, M = _edge_forces(state.q, state.d1, state.reference_twist, state.lam, rod.edge_nodes, rod.vertex_nodes,
                         rod.vertex_edges, rod.l_bar, plan.k_stretch, plan.kappa_bar, rod.twist_bar, plan.weld,
-                        rod.voronoi, rod.A1, rod.A2, plan.has_stretch, plan.has_bend, plan.has_twist)
+                        rod.voronoi, plan.A1, plan.A2, plan.has_stretch, plan.has_bend, plan.has_twist)
     f_int = float(max_row_norm(F)) if F.size else 0.0
     m_int = float(M.max()) if M.size else 0.0
     L = rod.length
@@ -273,7 +282,7 @@ def load_scales(system, state):
     # rest would otherwise be judged against its round-off, with a residual of order 1 for ever
     X = max(float(np.abs(state.q.reshape(-1, 4)[:, :3]).max()), L)
     h = float(rod.l_bar.min())
-    A = max(rod.A1, rod.A2)
+    A = max(rod.bending_scale, rod.twisting_scale)
     eps100 = 100.0 * np.finfo(float).eps
     if f_int <= eps100 * X * (A / h ** 3 + float(plan.k_stretch.max(initial=0.0))):
         f_int = 0.0
@@ -282,7 +291,7 @@ def load_scales(system, state):
     F_raw = max(system.applied_force, f_int, contact_force_scale(system))   # contact forces are loads too
     M_raw = max(system.applied_moment, m_int)
     if F_raw == 0.0 and M_raw == 0.0:
-        return rod.A1 / L ** 2, rod.A1 / L
+        return rod.bending_scale / L ** 2, rod.bending_scale / L
     # a force scale implies a moment scale over the rod length and vice versa (e.g. a rod loaded only by
     # torques has no force of its own: round-off forces must not set the scale)
     return max(F_raw, M_raw / L), max(M_raw, F_raw * L)
@@ -402,6 +411,10 @@ def is_interrupt(exc):
 def final_result(system, state, status, **fields):
     """The SolveResult of a solve that ended in ``status`` at ``state``: the force-derived fields (load scale,
     residual per unit length, energy by term) are evaluated here, once, for both solvers."""
+    if system.parts is not None:          # several rods (multi.py)
+        from . import multi
+
+        return multi.final_result(system, state, status, **fields)
     from .options import CONVERGED_STATUSES, SolveResult
 
     evaluate_system(system, state, 1)
@@ -465,6 +478,10 @@ def support_reactions(system, state):
 
 
 def max_strain(system, state):
+    if system.parts is not None:          # several rods (multi.py)
+        from . import multi
+
+        return multi.max_strain(system, state)
     rod = system.rod
     return float(np.max(np.abs(elongations(state.q, rod.edge_nodes, rod.l_bar) / rod.l_bar)))
 
@@ -472,6 +489,10 @@ def max_strain(system, state):
 def constraint_residual(system, state, scales):
     """The elongation left in an inextensible rod as a residual (same units as ``residual_norm``): the force
     k_j |g_j| a multiplier update would shift, relative to the force scale."""
+    if system.parts is not None:          # several rods (multi.py)
+        from . import multi
+
+        return multi.constraint_residual(system, state, scales)
     rod = system.rod
     g = elongations(state.q, rod.edge_nodes, rod.l_bar)
     return float(np.max(system.k_stretch * np.abs(g)) / scales[0])
@@ -490,6 +511,10 @@ def multiplier_update(system, state, previous=None):
     itself nearly inextensible -- a straight rod under tension, a tight helix -- resists the multiplier update,
     and the remedy of the method of multipliers is a larger penalty. An elongation that changed sign means the
     update overshot: then the penalty is left alone."""
+    if system.parts is not None:          # several rods (multi.py)
+        from . import multi
+
+        return multi.multiplier_update(system, state, previous)
     rod = system.rod
     g = elongations(state.q, rod.edge_nodes, rod.l_bar)
     k = system.plan.k_stretch
@@ -505,6 +530,10 @@ def multiplier_update(system, state, previous=None):
 
 def transport(system, base, q_new, out):
     """Put ``q_new`` into ``out`` with frames transported from ``base``; False if an edge reversed/vanished."""
+    if system.parts is not None:          # several rods (multi.py)
+        from . import multi
+
+        return multi.transport(system, base, q_new, out)
     rod = system.rod
     if out is not base:
         out.q[:] = q_new
@@ -552,6 +581,10 @@ def prepare_state(system, state):
 
 def energy_terms(system, state):
     """Energy of each term the scene uses, plus the work of the constant generalized loads."""
+    if system.parts is not None:          # several rods (multi.py)
+        from . import multi
+
+        return multi.energy_terms(system, state)
     from ..energies.bend import bend_energy
     from ..energies.stretch import stretch_energy
     from ..energies.twist import twist_energy
@@ -562,10 +595,10 @@ def energy_terms(system, state):
         out["stretch"] = float(stretch_energy(state.q, rod.edge_nodes, rod.l_bar, plan.k_stretch, state.lam))
     if plan.has_bend:
         ed = edge_frames(state.q, rod.edge_nodes, state.d1)
-        out["bend"] = float(bend_energy(ed, rod.vertex_edges, plan.weld, plan.kappa_bar, rod.voronoi, rod.A1))
+        out["bend"] = float(bend_energy(ed, rod.vertex_edges, plan.weld, plan.kappa_bar, rod.voronoi, plan.A1))
     if plan.has_twist:
         out["twist"] = float(twist_energy(state.q, rod.vertex_edges, state.reference_twist, plan.weld, rod.twist_bar,
-                                          rod.voronoi, rod.A2))
+                                          rod.voronoi, plan.A2))
     if system.terms:
         out["contact"] = float(sum(t.evaluate(state, 0, None, None, None) for t in system.terms))
     return out

@@ -67,6 +67,7 @@ class SelfContact:
     dhat: float | None = None
     kappa: float | None = None
     constructor = "self_contact(radius)"
+    explicit_ok = True          # the explicit solver handles it (der/solvers/explicit_contact.py)
 
     def check_scene(self, scene):
         curvature_radius_check(scene.rod, None, self.radius, "der.self_contact")
@@ -147,10 +148,17 @@ class BoundBarrier:
         from ..scene import evaluate
 
         n = system.n_dof
-        grad, fext = np.zeros(n), np.zeros(n)
-        evaluate(system.plan, state.q, state.d1, state.reference_twist, state.lam, 1, grad, fext, system.ab,
-                 system.kl, system.ku, system.perm)
-        R = fext - grad
+        R = np.zeros(n)
+        # the elastic residual of each rod (one, or several side by side: der/solvers/multi.py)
+        parts = system.parts if system.parts is not None else (system,)
+        rod_states = state.rods if system.parts is not None else (state,)
+        off = 0
+        for p, s in zip(parts, rod_states):
+            m = p.n_dof
+            grad, fext = np.zeros(m), np.zeros(m)
+            evaluate(p.plan, s.q, s.d1, s.reference_twist, s.lam, 1, grad, fext, p.ab, p.kl, p.ku, p.perm)
+            R[off:off + m] = fext - grad
+            off += m
         kappa, self.kappa = self.kappa, 1.0
         gB = np.zeros(n)
         self.evaluate(state, 1, gB, system.ab, [])
@@ -285,3 +293,164 @@ class BoundSelfContact(BoundBarrier):
 def _unit(v):
     n = np.linalg.norm(v, axis=1, keepdims=True) if v.size else np.ones((0, 1))
     return v / np.where(n > 0, n, 1.0)
+
+
+@register
+@dataclass(frozen=True)
+class RodContact:
+    """Contact between the rods of a scene (and within each); build it with ``der.rod_contact``."""
+
+    radius: float | tuple
+    dhat: float | None = None
+    kappa: float | None = None
+    within: bool = True
+    constructor = "rod_contact(radius)"
+    explicit_ok = True          # on one rod (a scene of several rods needs the implicit solver)
+
+    def radii(self, n_rods):
+        """One radius per rod."""
+        if isinstance(self.radius, tuple):
+            if len(self.radius) != n_rods:
+                raise ValueError(f"der.rod_contact: radius gives {len(self.radius)} radii for a scene of {n_rods} "
+                                 "rods; give one radius, or one per rod")
+            return self.radius
+        return (self.radius,) * n_rods
+
+    @property
+    def dhat_value(self):
+        r = min(self.radius) if isinstance(self.radius, tuple) else self.radius
+        return DHAT_FRACTION * r if self.dhat is None else self.dhat
+
+    def check_scene(self, scene):
+        for i, (rod, r) in enumerate(zip(scene.rods, self.radii(len(scene.rods)))):
+            where = f"der.rod_contact (rod {i})"
+            curvature_radius_check(rod, None, r, where)
+            h = float(rod.l_bar.min())
+            if self.within and rod.closed and rod.n_edges <= 2 * math.ceil((math.pi * r + self.dhat_value) / h) + 1:
+                raise ValueError(f"{where}: the ring has {rod.n_edges} edges, too few for its neighbour exclusion "
+                                 f"(an arc pi r + dhat = {math.pi * r + self.dhat_value:.4g} on each side, edge "
+                                 f"length {h:.4g}); refine the ring or reduce the radius")
+
+    def bind(self, system):
+        return BoundRodContact(self, system)
+
+
+def rod_contact(radius, dhat=None, kappa=None, within=True):
+    """Contact between the rods of a scene of several rods -- and, with ``within`` (the default), of each rod
+    with itself: no two non-neighbouring edges of the scene come closer than r_a + r_b (centreline distance) and
+    none passes through another, also within a solver step (IPC barrier with a CCD-limited step, as
+    ``der.self_contact``). Pairs of edges of two rods couple their DOFs like self-contact pairs: the implicit
+    solver factorises a sparse matrix while a pair is active, the banded one otherwise.
+
+    Parameters
+    ----------
+    radius : float > 0, or a sequence of them (one per rod)
+        The rods' (hard-core) radius r (length): two rods touch at centreline distance r_a + r_b.
+    dhat : float > 0, optional
+        The range of the barrier (a gap, length; default 0.1 times the smallest radius).
+    kappa : float > 0, optional
+        Barrier stiffness (energy / length^2). Default: adaptive (docs/contact.md section 6).
+    within : bool
+        Also each rod with itself (neighbours along a rod within an arc pi r + dhat excluded, as
+        ``der.self_contact``); False for contact between different rods only.
+
+    In a one-rod scene it is that rod's self-contact. Obstacles (``der.plane``, ...) in the same scene take its
+    radius unless given their own.
+
+    Example
+    -------
+    Two crossed rods (A along x, clamped at both ends; B along y above it, in sleeves along z, pushed down):
+
+    >>> import der
+    >>> a = der.rod_from_shape(der.shapes.straight(1.0, 20, axis=[1, 0, 0], director=[0, 0, 1]), A1=1.0, A2=1.5,
+    ...                        EA=1e3)
+    >>> x_b = der.shapes.straight(1.0, 21, axis=[0, 1, 0], director=[0, 0, 1]).positions + [0.5, -0.5, 0.1]
+    >>> b = der.rod_from_shape(der.shapes.Shape(x_b, director=[0, 0, 1]), A1=1.0, A2=1.5, EA=1e3)
+    >>> scene = der.Scene([der.Scene(a, constraints=[der.clamp("start"), der.clamp("end")]),
+    ...                    der.Scene(b, loads=[der.distributed_force([0, 0, -0.5])],
+    ...                              constraints=[der.clamp("start", slide=2), der.clamp("end", slide=2)])],
+    ...                   contacts=[der.rod_contact(0.02)])
+    >>> result = der.solve(scene)
+    >>> round(float(sum(r["force"][2] for r in result.rods[0]["reactions"])), 6)   # A's clamps carry the push
+    0.5
+    """
+    if isinstance(radius, (list, tuple, np.ndarray)):
+        radius = tuple(positive_radius(r, f"der.rod_contact: radius[{i}]") for i, r in enumerate(radius))
+        if not radius:
+            raise ValueError("der.rod_contact: radius is an empty sequence; give one radius, or one per rod")
+    else:
+        radius = positive_radius(radius, "der.rod_contact: radius")
+    if dhat is not None:
+        dhat = positive_radius(dhat, "der.rod_contact: dhat")
+    if kappa is not None:
+        kappa = validate.finite_number(kappa, "der.rod_contact: kappa")
+        if not kappa > 0:
+            raise ValueError(f"der.rod_contact: kappa must be > 0 (or None: adaptive); got {kappa!r}")
+    if not isinstance(within, (bool, np.bool_)):
+        raise ValueError(f"der.rod_contact: within must be True or False; got {within!r}")
+    return RodContact(radius, dhat, kappa, bool(within))
+
+
+class BoundRodContact(BoundSelfContact):
+    """``der.rod_contact`` within one solve: the self-contact machinery over all the scene's edges, numbered rod
+    after rod (der/solvers/multi.py RodGroup), with a neighbour exclusion per rod (all of a rod's own pairs
+    without ``within``)."""
+
+    def __init__(self, term, system):
+        from .. import contact as C
+        from ..contact import assembly
+
+        self.C, self.A = C, assembly
+        self.term = term
+        scene = system.scene
+        self.rods = scene.rods
+        self.radii = term.radii(len(self.rods))
+        self.radius = float(max(self.radii))
+        self.dhat = term.dhat_value
+        spec = [(r.n_edges, r.closed, rad, float(r.l_bar.min())) for r, rad in zip(self.rods, self.radii)]
+        topo = C.topology(spec, self.dhat)
+        ks = [C.exclusion_k(h, rad, self.dhat, arc=np.pi * rad + self.dhat) if term.within else n
+              for (n, _, rad, h) in spec]
+        self.topo = topo._replace(rod_k=np.array(ks, dtype=np.int64))
+        self.rod = system.rod                   # a Rod, or the RodGroup of several
+        self.edge_offsets = np.concatenate([[0], np.cumsum([r.n_edges for r in self.rods])]).astype(np.int64)
+        self.n_nodes = sum(r.n_nodes for r in self.rods)
+        self.n_dof = 4 * self.n_nodes
+        self.node_dof = 4 * np.arange(self.n_nodes, dtype=np.int64)
+        self._init_stiffness(term.kappa, system)
+
+    def rod_edge(self, e):
+        """(rod, local edge) of the global edge e."""
+        i = int(np.searchsorted(self.edge_offsets, e, side="right") - 1)
+        return i, int(e - self.edge_offsets[i])
+
+    def check_start(self, state):
+        rod_states = getattr(state, "rods", [state])
+        for i, (rod, s, r) in enumerate(zip(self.rods, rod_states, self.radii)):
+            curvature_radius_check(rod, s, r, f"der.rod_contact (rod {i})")
+        pos = self.positions(state)
+        pairs = self.C.candidate_pairs(pos, self.topo, 0.0)
+        if pairs.shape[0]:
+            gap, *_ = self._pair_data(pos, pairs)
+            p = int(np.argmin(gap))
+            if gap[p] <= 0.0:
+                (ra, ea), (rb, eb) = self.rod_edge(pairs[p, 0]), self.rod_edge(pairs[p, 1])
+                off = self.topo.edge_radius[pairs[p, 0]] + self.topo.edge_radius[pairs[p, 1]]
+                raise ValueError(f"der.rod_contact: the starting state violates the contact distance: edge {ea} of rod "
+                                 f"{ra} and edge {eb} of rod {rb} are {gap[p] + off:.6g} apart (centrelines), not "
+                                 f"more than r_a + r_b = {off:.6g}")
+
+    def diagnostics(self, state):
+        """As ``der.self_contact``'s, with the pairs' edges numbered rod after rod, ``pair_rods`` (the two rods
+        of each pair) and ``local_pairs`` (each edge's index along its rod)."""
+        out = super().diagnostics(state)
+        pairs = np.asarray(out["pairs"], dtype=np.int64).reshape(-1, 2)
+        loc = [[self.rod_edge(a), self.rod_edge(b)] for a, b in pairs]
+        out.update(kind="rod_contact", radii=list(self.radii), pair_rods=[[a[0], b[0]] for a, b in loc],
+                   local_pairs=[[a[1], b[1]] for a, b in loc])
+        ea, eb = out["min_distance_edges"]
+        if ea >= 0:
+            off = self.topo.edge_radius[ea] + self.topo.edge_radius[eb]
+            out["min_distance"] = float(out["min_distance"] - 2 * self.radius + off)
+            out["min_distance_rods"] = [self.rod_edge(ea)[0], self.rod_edge(eb)[0]]
+        return out

@@ -10,7 +10,7 @@ import numpy as np
 
 from .. import validate
 from . import register
-from .contact import MIN_GAP_FRACTION, DHAT_FRACTION, BoundBarrier, SelfContact, positive_radius
+from .contact import MIN_GAP_FRACTION, DHAT_FRACTION, BoundBarrier, RodContact, SelfContact, positive_radius
 
 PLANE, SPHERE, CYLINDER = 0, 1, 2           # as der/contact/obstacles.py
 _NAMES = {PLANE: "plane", SPHERE: "sphere", CYLINDER: "cylinder"}
@@ -39,8 +39,10 @@ class Obstacle:
         for t in scene.contacts:
             if isinstance(t, SelfContact):
                 return t.radius
+            if isinstance(t, RodContact) and not isinstance(t.radius, tuple):
+                return t.radius
         raise ValueError(f"der.{self.name}: give the rod's radius (der.{self.name}(..., radius=r)) or add "
-                         "der.self_contact(radius) to the scene's contacts")
+                         "der.self_contact(radius) or der.rod_contact(radius) to the scene's contacts")
 
     def check_scene(self, scene):
         self.rod_radius(scene)

@@ -1,0 +1,326 @@
+"""Contact in the explicit solver (issue 14): FIRE with the IPC barrier forces and a CCD-proven step.
+
+The FIRE kernel of ``explicit.py`` with three additions, kept in this module so that a scene without contact
+imports no contact code (``explicit.py`` imports this only when the scene has contact terms):
+
+1. Forces: the barrier gradient of the self-contact pairs (``der.self_contact`` / ``der.rod_contact`` on one
+   rod) is added to dE/dq at every step, and the barrier energy to the energy the FIRE guard watches (the
+   total kinetic + elastic + barrier - load work never increases, as without contact).
+2. No passage: every step is first tried, then checked by continuous collision detection along the straight
+   path from the old to the new positions (``der.contact.ccd.pairs_ccd``: every listed pair keeps at least
+   ``MIN_GAP_FRACTION`` of its gap over the whole step). A step that CCD does not prove safe is rejected like
+   one that raises the energy: back to the old state, at rest, with a smaller step. Accepted steps are
+   therefore proven non-crossing, however large the forces.
+3. Candidate pairs (a Verlet list): the broad phase runs in Python on boxes inflated by ``dhat + 2 margin``;
+   pairs not in the list are then more than dhat + 2 margin apart. The kernel ends its call (status
+   ``STATUS_REBUILD``) before any step that would move a node more than ``margin`` from where the list was
+   built, so an unlisted pair never comes within dhat (no force missed) nor touches (no passage missed).
+
+Layout as in ``explicit._fire_run``; contact arrays as in der/contact (edges (n_edges, 2) node indices,
+pairs (n_pairs, 2) edge indices, edge_radius (n_edges,), node_dof (n_nodes,) the index of each node's x).
+"""
+import numpy as np
+from numba import njit
+
+from ..contact.barrier import GAP, pair_barrier
+from ..contact.ccd import pairs_ccd
+from ..geometry import transport_frames
+from ..linalg import condense_vector
+from ..scene import evaluate
+from .explicit import NOISE_FACTOR, STATUS_CONVERGED, STATUS_NONFINITE, STATUS_RUNNING
+from .projection import project_force, project_positions, project_velocity
+
+STATUS_REBUILD = 3
+MIN_GAP_FRACTION = 0.1       # as the implicit solver's line search (der/terms/contact.py)
+CCD_TOL, CCD_MAX_ITER = 1e-6, 10000
+
+
+@njit(cache=True)
+def barrier_gradient(q, edges, pairs, edge_radius, dhat, kappa, grad):
+    """kappa sum b(gap) over the pairs (GAP variable), and its gradient added into ``grad`` (n_dof,) at the node
+    DOFs 4 k (positions are q.reshape(-1, 4)[:, :3]). Returns (energy, min gap); energy +inf on an overlap."""
+    x = np.empty(12)
+    g = np.empty(12)
+    H = np.empty((12, 12))
+    energy = 0.0
+    min_gap = np.inf
+    for p in range(pairs.shape[0]):
+        ea, eb = pairs[p, 0], pairs[p, 1]
+        nodes = (edges[ea, 0], edges[ea, 1], edges[eb, 0], edges[eb, 1])
+        for k in range(4):
+            for i in range(3):
+                x[3 * k + i] = q[4 * nodes[k] + i]
+        e, z = pair_barrier(x, edge_radius[ea] + edge_radius[eb], dhat, kappa, GAP, False, g, H)
+        min_gap = min(min_gap, z)
+        if e == 0.0:
+            continue
+        if not np.isfinite(e):
+            return np.inf, min_gap
+        energy += e
+        for k in range(4):
+            for i in range(3):
+                grad[4 * nodes[k] + i] += g[3 * k + i]
+    return energy, min_gap
+
+
+@njit(cache=True)
+def _positions(q, n_nodes, out):
+    for k in range(n_nodes):
+        for i in range(3):
+            out[k, i] = q[4 * k + i]
+
+
+@njit(cache=True)
+def _max_shift(q, x_ref):
+    """Largest node displacement |x_k - x_ref_k|."""
+    m = 0.0
+    for k in range(x_ref.shape[0]):
+        s = 0.0
+        for i in range(3):
+            s += (q[4 * k + i] - x_ref[k, i]) ** 2
+        m = max(m, s)
+    return np.sqrt(m)
+
+
+@njit(cache=True)
+def _forces(plan, q, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius, dhat, kappa):
+    """Elastic + barrier energy; grad <- dE/dq (barrier included), fext <- the loads."""
+    energy = evaluate(plan, q, d1, twist, lam, 1, grad, fext, ab, kl, ku, perm)
+    e_c, _ = barrier_gradient(q, edges, pairs, edge_radius, dhat, kappa, grad)
+    return energy + e_c
+
+
+@njit(cache=True)
+def fire_run_contact(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol, n_steps, dt, dt_max,
+                     alpha, n_pos, n_min, f_inc, f_dec, alpha0, f_alpha, kl, ku, perm, e_total, work_done, guard,
+                     project, w, closed, target, max_strain, noise, link_dep, link_const, tri_dep, tri_master,
+                     tri_coef, edges, pairs, edge_radius, dhat, kappa, x_ref, margin, fresh):
+    """``explicit._fire_run`` with contact (module docstring). Returns (status, steps, residual, dt, alpha, n_pos,
+    e_total, work_done, rejected, dt_max, ccd_rejected); status STATUS_REBUILD when the next step would move a
+    node more than ``margin`` from ``x_ref`` (the state is the last accepted one: rebuild the pair list and call
+    again). ``fresh``: the list was just built at this state (then such a step is rejected with a smaller dt
+    instead, so that every call advances)."""
+    n = q.shape[0]
+    n_nodes = x_ref.shape[0]
+    grad = np.zeros(n)
+    fext = np.zeros(n)
+    ab = np.zeros((1, 1))
+    q_old = q.copy()
+    d1_old = d1.copy()
+    t_old = tangents.copy()
+    tw_old = twist.copy()
+    f = np.zeros(n)
+    pos0 = np.empty((n_nodes, 3))
+    dpos = np.empty((n_nodes, 3))
+    energy = _forces(plan, q, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius, dhat, kappa)
+    residual = np.inf
+    rejected = 0
+    ccd_rejected = 0
+    for step in range(n_steps):
+        residual = 0.0
+        for i in range(n):
+            f[i] = fext[i] - grad[i]
+        condense_vector(f, tri_dep, tri_master, tri_coef, fixed)
+        if project and not project_force(q, plan.edge_nodes, plan.l_bar, w, closed, f, lam):
+            return (STATUS_NONFINITE, step, residual, dt, alpha, n_pos, e_total, work_done, rejected, dt_max,
+                    ccd_rejected)
+        for i in range(n):
+            r = abs(f[i]) * inv_scale[i]
+            if r > residual:
+                residual = r
+        if not np.isfinite(residual) or not np.isfinite(energy):
+            return (STATUS_NONFINITE, step, residual, dt, alpha, n_pos, e_total, work_done, rejected, dt_max,
+                    ccd_rejected)
+        if residual <= tol:
+            return (STATUS_CONVERGED, step, residual, dt, alpha, n_pos, e_total, work_done, rejected, dt_max,
+                    ccd_rejected)
+        power = 0.0
+        vnorm2 = 0.0
+        fnorm2 = 0.0
+        pnoise2 = 0.0
+        for i in range(n):
+            power += f[i] * v[i]
+            vnorm2 += mass[i] * v[i] * v[i]
+            fnorm2 += f[i] * f[i] / mass[i]
+            pnoise2 += (noise[i] * v[i]) ** 2
+        if power > -NOISE_FACTOR * np.sqrt(pnoise2):
+            if fnorm2 > 0.0:
+                c = alpha * np.sqrt(vnorm2 / fnorm2)
+                for i in range(n):
+                    v[i] = (1.0 - alpha) * v[i] + c * f[i] / mass[i]
+            n_pos += 1
+            if n_pos > n_min:
+                dt = min(dt * f_inc, dt_max)
+                alpha *= f_alpha
+        else:
+            for i in range(n):
+                v[i] = 0.0
+            dt *= f_dec
+            alpha = alpha0
+            n_pos = 0
+        q_old[:] = q
+        d1_old[:, :] = d1
+        t_old[:, :] = tangents
+        tw_old[:] = twist
+        v_old = v.copy()
+        for i in range(n):
+            if not fixed[i]:
+                v[i] += dt * f[i] / mass[i]
+                q[i] += dt * v[i]
+        for k in range(link_dep.shape[0]):
+            q[link_dep[k]] = link_const[k]
+        for k in range(tri_dep.shape[0]):
+            q[tri_dep[k]] += tri_coef[k] * q[tri_master[k]]
+        ok = True
+        if project:
+            ok = project_positions(q, plan.edge_nodes, plan.l_bar, w, closed, 20, target) <= max_strain
+            if ok:
+                ok = project_velocity(q, plan.edge_nodes, plan.l_bar, w, closed, v)
+        if ok and _max_shift(q, x_ref) > margin:
+            if not (fresh and step == 0):
+                # the pair list no longer covers this step: end the call at the last accepted state
+                q[:] = q_old
+                v[:] = v_old
+                return (STATUS_REBUILD, step, residual, dt, alpha, n_pos, e_total, work_done, rejected, dt_max,
+                        ccd_rejected)
+            ok = False          # a single step larger than the margin: reject it, smaller dt
+        if ok and pairs.shape[0]:
+            # no passage: the straight path q_old -> q must keep every listed pair's gap above a fraction of its
+            # start value (a step CCD does not prove safe is rejected below)
+            _positions(q_old, n_nodes, pos0)
+            _positions(q, n_nodes, dpos)
+            for k in range(n_nodes):
+                for i in range(3):
+                    dpos[k, i] -= pos0[k, i]
+            tau, _, _ = pairs_ccd(pos0, dpos, edges, pairs, edge_radius, MIN_GAP_FRACTION, CCD_TOL, CCD_MAX_ITER)
+            if tau < 1.0:
+                ok = False
+                ccd_rejected += 1
+        ok = ok and transport_frames(q, plan.edge_nodes, plan.vertex_edges, t_old, d1_old, tw_old, tangents, d1,
+                                     twist)
+        fext_old_dot = 0.0
+        for i in range(n):
+            fext_old_dot += fext[i] * (q[i] - q_old[i])
+        new_energy = np.inf
+        if ok:
+            new_energy = _forces(plan, q, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius,
+                                 dhat, kappa)
+        kinetic = 0.0
+        fext_new_dot = 0.0
+        for i in range(n):
+            kinetic += 0.5 * mass[i] * v[i] * v[i]
+            fext_new_dot += fext[i] * (q[i] - q_old[i])
+        new_work = work_done + 0.5 * (fext_old_dot + fext_new_dot)
+        new_total = kinetic + new_energy - new_work
+        slack = guard * (abs(new_energy) + abs(new_work) + abs(kinetic))
+        if not ok or not (new_total <= e_total + slack):
+            rejected += 1
+            if dt > 0.5 * dt_max:
+                dt_max *= 0.9
+            q[:] = q_old
+            d1[:, :] = d1_old
+            tangents[:, :] = t_old
+            twist[:] = tw_old
+            for i in range(n):
+                v[i] = 0.0
+            dt *= f_dec
+            alpha = alpha0
+            n_pos = 0
+            energy = _forces(plan, q, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius, dhat,
+                             kappa)
+            e_total = energy - work_done
+            continue
+        energy = new_energy
+        work_done = new_work
+        e_total = new_total
+    return (STATUS_RUNNING, n_steps, residual, dt, alpha, n_pos, e_total, work_done, rejected, dt_max,
+            ccd_rejected)
+
+
+class ContactRun:
+    """The Python side of the explicit solver's contact (module docstring): the Verlet pair list of the scene's
+    self-contact term, rebuilt when the kernel asks, and a ``run`` with the signature of ``explicit._fire_run``.
+    Only terms with edge-pair barriers (``der.self_contact``, ``der.rod_contact`` on one rod) are handled."""
+
+    def __init__(self, system):
+        terms = system.terms
+        bad = [t for t in terms if not hasattr(t, "topo")]
+        if bad or len(terms) != 1:
+            raise ValueError("the explicit solver handles one self-contact term (der.self_contact or "
+                             "der.rod_contact on one rod); obstacles and several contact terms need "
+                             "solver='implicit'")
+        self.term = terms[0]
+        self.system = system
+        self.margin = self.term.radius
+        self.x_ref = None
+        self.pairs = None
+        self.rebuilds = 0
+        self.ccd_rejected = 0
+
+    def energy(self, state):
+        """The barrier energy at ``state`` (for the FIRE guard's starting total)."""
+        t = self.term
+        return float(t.evaluate(state, 0, None, None, None))
+
+    def _rebuild(self, q):
+        from .. import contact as C
+
+        t = self.term
+        self.x_ref = np.ascontiguousarray(q.reshape(-1, 4)[:t.n_nodes, :3])
+        self.pairs = C.candidate_pairs(self.x_ref, t.topo, t.dhat + 2.0 * self.margin)
+        self.rebuilds += 1
+
+    def run(self, plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol, n_steps, *rest):
+        """``explicit._fire_run``'s contract, run in calls of the contact kernel between pair-list rebuilds
+        (bounded: every call after a rebuild takes or rejects at least one step)."""
+        t = self.term
+        (dt, dt_max, alpha, n_pos, n_min, f_inc, f_dec, alpha0, f_alpha, kl, ku, perm, e_total, work_done, guard,
+         project, w, closed, target, max_strain, noise, link_dep, link_const, tri_dep, tri_master, tri_coef) = rest
+        done_total, rejected_total = 0, 0
+        status, residual = STATUS_RUNNING, np.inf
+        fresh = self.x_ref is None or _max_shift(q, self.x_ref) > self.margin
+        while done_total < n_steps:
+            if fresh:
+                self._rebuild(q)
+            out = fire_run_contact(
+                plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol, n_steps - done_total, dt, dt_max,
+                alpha, n_pos, n_min, f_inc, f_dec, alpha0, f_alpha, kl, ku, perm, e_total, work_done, guard, project,
+                w, closed, target, max_strain, noise, link_dep, link_const, tri_dep, tri_master, tri_coef,
+                t.topo.edges, self.pairs, t.topo.edge_radius, t.dhat, t.kappa, self.x_ref, self.margin, fresh)
+            status, done, residual, dt, alpha, n_pos, e_total, work_done, rejected, dt_max, ccd = out
+            done_total += done
+            rejected_total += rejected
+            self.ccd_rejected += ccd
+            if status != STATUS_REBUILD:
+                break
+            fresh = True
+        if status == STATUS_REBUILD:
+            status = STATUS_RUNNING
+        return status, done_total, residual, dt, alpha, n_pos, e_total, work_done, rejected_total, dt_max
+
+
+_WARM = []
+
+
+def warmup():
+    """Compile (or load from numba's cache) the explicit solver's contact kernels once per process: a few FIRE
+    steps of a small twisted ring with self-contact, so that a solve's wall time holds no compilation. Returns
+    the seconds it took (0 afterwards)."""
+    if _WARM:
+        return 0.0
+    import time
+
+    from .. import shapes
+    from ..rod import rod_from_shape
+    from ..scene import Scene
+    from ..terms.contact import self_contact
+    from . import solve
+
+    _WARM.append(0.0)              # (the solve below calls this again)
+    t0 = time.perf_counter()
+    base = rod_from_shape(shapes.ring(1.0, 24), 1.0, 1.5)
+    ring = base.with_natural(kappa_bar=base.kappa_bar * 0.0)
+    solve(Scene(ring, contacts=[self_contact(0.02)]), solver="explicit", max_steps=20, stability=False,
+          raise_on_failure=False)
+    _WARM[0] = time.perf_counter() - t0
+    return _WARM[0]

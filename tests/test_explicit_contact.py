@@ -1,0 +1,75 @@
+"""Contact in the explicit solver (issue 14): FIRE with barrier forces and CCD-proven steps reaches the implicit
+solver's self-contact equilibrium (a naturally straight ring twisted to twice Michell's threshold writhes into
+self-contact), Lk = twist / 2 pi and the strands stay more than 2r apart after every kernel call, and what it
+cannot do is refused with a clear message."""
+import numpy as np
+import pytest
+
+import der
+from der import closed_forms as cf
+from der import diagnostics as dg
+
+A1, A2 = 1.0, 1.0 / 0.67
+R = 0.05
+
+
+def _twisted_ring(n=40, factor=2.0):
+    base = der.rod_from_shape(der.shapes.ring(1.0, n), A1, A2)
+    base = base.with_natural(kappa_bar=base.kappa_bar * 0.0)        # naturally straight, closed into a ring
+    twist = factor * cf.michell_twist(A1, A2)
+    rod = base.with_imposed_twist(twist)
+    x0 = rod.rest_q.reshape(-1, 4)[:, :3]
+    phi = np.arctan2(x0[:, 1], x0[:, 0])
+    dx = np.zeros_like(x0)
+    dx[:, 2] = 0.05 * (np.cos(2 * phi) + np.sin(3 * phi))
+    start = rod.displaced(rod.rest_state(), dx, twist * np.arange(n) / n)
+    return rod, twist, start
+
+
+def test_explicit_reaches_the_implicit_self_contact_equilibrium_and_conserves_lk(monkeypatch):
+    import der.solvers.explicit_contact as ec
+
+    rod, twist, start = _twisted_ring()
+    scene = der.Scene(rod, contacts=[der.self_contact(R)])
+    implicit = der.solve(scene, state=start, stability=False, tol=1e-8)
+    seen = []
+    run = ec.ContactRun.run
+
+    def watching(self, plan, q, d1, *args):
+        out = run(self, plan, q, d1, *args)
+        state = der.RodState(q.copy(), d1.copy(), np.zeros_like(d1), args[1].copy())
+        state.tangents[:] = der.geometry.tangents(q, rod.edge_nodes)
+        seen.append((dg.linking_number(rod, state)[0], self.term.diagnostics(state)["min_distance"]))
+        return out
+
+    monkeypatch.setattr(ec.ContactRun, "run", watching)
+    explicit = der.solve(scene, state=start, solver="explicit", stability=False, tol=1e-6)
+    assert implicit.converged and explicit.converged
+    assert len(seen) >= 3
+    lk = twist / (2 * np.pi)
+    for lk_i, d_i in seen:
+        assert lk_i == pytest.approx(lk, abs=1e-6)        # no strand passage at any kernel call
+        assert d_i > 2 * R
+    # the same equilibrium (the ring's shape may slide along itself: compare what does not depend on that)
+    lk_e, tw_e, wr_e = dg.linking_number(rod, explicit.state)
+    lk_i, tw_i, wr_i = dg.linking_number(rod, implicit.state)
+    assert lk_e == pytest.approx(lk, abs=1e-6) and lk_i == pytest.approx(lk, abs=1e-6)
+    assert wr_i > 1.5                                      # it writhed into self-contact
+    assert wr_e == pytest.approx(wr_i, abs=1e-4)
+    for term in ("bend", "twist", "contact"):
+        assert explicit.energy[term] == pytest.approx(implicit.energy[term], rel=1e-4)
+    ci, ce = implicit.contact, explicit.contact
+    assert ci["n_contacts"] > 0 and ce["n_contacts"] == ci["n_contacts"]
+    assert ce["min_distance"] == pytest.approx(ci["min_distance"], abs=1e-6)
+    assert ce["total_force"] == pytest.approx(ci["total_force"], rel=1e-3)
+    assert "refused by CCD" in explicit.message
+
+
+def test_explicit_refuses_obstacles_and_several_rods():
+    rod = der.rod_from_shape(der.shapes.straight(1.0, 20), A1=A1, A2=A2)
+    floor = der.Scene(rod, constraints=[der.clamp("end")], contacts=[der.plane([0, 0, -1], [0, 0, 1], radius=0.01)])
+    with pytest.raises(ValueError, match="implicit"):
+        der.solve(floor, solver="explicit")
+    two = der.Scene([rod, rod], contacts=[der.rod_contact(0.01)])
+    with pytest.raises(ValueError, match="implicit"):
+        der.solve(two, solver="explicit")

@@ -821,7 +821,7 @@ class _NewmarkRun(_Run):
         if self.inext:
             rod = self.rod
             inertial = rod.rho_A * rod.l_bar / dt ** 2
-            bending = max(rod.A1, rod.A2) / rod.l_bar ** 3
+            bending = max(float(np.max(rod.A1)), float(np.max(rod.A2))) / rod.l_bar ** 3
             k = DYNAMIC_PENALTY * np.maximum(inertial, bending)
             self.system.plan.k_stretch[:] = k
             self.state.penalty = k.copy()
@@ -1020,9 +1020,9 @@ class _VerletRun(_Run):
         self.strain_tol = strain_tol
         sysm = self.system
         if self.inext and sysm.links.dep.size:
-            raise ValueError("der.simulate: integrator='verlet' with an inextensible rod supports clamps and pins "
-                             "only: the projection cannot yet keep a hinge's or roller's (or a sliding clamp's) "
-                             "end edge on its support; use integrator='newmark' or give the rod EA")
+            raise ValueError("der.simulate: integrator='verlet' with an inextensible rod supports pins only "
+                             "(der.pin): the projection cannot yet keep the end edge of a clamp, hinge or roller "
+                             "on its support; use integrator='newmark' or give the rod EA")
         if self.inext:
             sysm.plan.k_stretch[:] = 0.0           # the tension is the projection's
             state.lam[:] = 0.0

@@ -30,6 +30,8 @@ from .solvers import (
 )
 from .sweep import SweepResult, sweep
 from .warmup import warmup
+from . import dynamics
+from .dynamics import Damping, Trajectory, simulate
 
 __all__ = [
     "shapes", "sections", "diagnostics", "solve", "check_stability", "warmup", "SolverOptions", "SolveResult",
@@ -39,4 +41,5 @@ __all__ = [
     "twisting_moment", "point_torque", "follower_force",
     "self_contact", "rod_contact", "plane", "sphere", "cylinder",
     "continuation", "Branch", "sweep", "SweepResult",
+    "simulate", "Damping", "Trajectory", "dynamics",
 ]

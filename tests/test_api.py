@@ -59,7 +59,7 @@ def test_every_public_name_has_a_docstring():
 
 @pytest.mark.parametrize("module", [der, der.loads, der.constraints, der.shapes, der.sections, rod_module, der.scene,
                                     diagnostics,
-                                    der.solvers, der.solvers.options], ids=lambda m: m.__name__)
+                                    der.solvers, der.solvers.options, der.dynamics], ids=lambda m: m.__name__)
 def test_docstring_examples_run(module):
     result = doctest.testmod(module, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
     assert result.failed == 0

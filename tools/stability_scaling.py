@@ -41,10 +41,17 @@ P = 1e-4   # a small transverse tip load (A1/L^2): a real solve; it moves the ei
 def row(n):
     rod = der.rod_from_shape(der.shapes.straight(1.0, n, axis=(0, 0, 1), director=(1, 0, 0)), 1.0, 1.0)
     scene = der.Scene(rod, loads=[der.end_force([P, 0, 0])], constraints=[der.clamp("start")])
-    res = der.solve(scene, progress=False)
+    try:
+        res = der.solve(scene, progress=False)
+    except der.ConvergenceError as exc:
+        # the tiny load's residual cannot be certified at this n (the floor verdict says why): no analysis of an
+        # uncertified state
+        r = exc.result
+        return {"n": n, "solve_s": r.wall_time, "iterations": r.iterations, "status": r.status,
+                "message": r.message, "exact": EXACT}
     out = lowest_modes(build_system(scene, der.SolverOptions()), res.state, 6)
     lam = float(res.min_eigenvalue)
-    return {"n": n, "solve_s": res.wall_time, "iterations": res.iterations, "stability_s": res.stability_time,
+    return {"n": n, "solve_s": res.wall_time, "iterations": res.iterations, "status": res.status, "stability_s": res.stability_time,
             "ratio": res.stability_time / res.wall_time, "lowest": lam, "exact": EXACT,
             "rel_error": (lam - EXACT) / EXACT, "rel_residual": float(out["residuals"][0]),
             "floor": float(out["floors"][0]), "method": out["method"], "note": res.stability_note}
@@ -64,6 +71,9 @@ def main(argv=None):
     print(f"{'n':>7} {'solve s':>8} {'stab s':>8} {'ratio':>6} {'lowest':>12} {'rel err':>10} {'residual':>9} "
           f"{'floor':>9}")
     for r in rows:
+        if "lowest" not in r:
+            print(f"{r['n']:>7} {r['solve_s']:8.3f}  {r['status']}: {r['message']}")
+            continue
         print(f"{r['n']:>7} {r['solve_s']:8.3f} {r['stability_s']:8.3f} {r['ratio']:6.2f} {r['lowest']:12.6f} "
               f"{r['rel_error']:10.2e} {r['rel_residual']:9.1e} {r['floor']:9.1e}")
     return 0

@@ -182,7 +182,7 @@ def end_quantities(x, frames):
 
 # ---- der ---------------------------------------------------------------------------------------------------
 
-def der_run(sweep, tol):
+def der_run(sweep, tol, force=0.0):
     import der
     from der import diagnostics as dg  # noqa: F401
 
@@ -197,13 +197,19 @@ def der_run(sweep, tol):
     bump[:, 0] = 1e-3 * L * np.sin(np.pi * np.clip(xi, 0, 1))
     from scenarios.plectoneme import rotation_z
 
-    total, iters, steps = 0.0, 0, []
+    total, iters, steps, refused = 0.0, 0, [], None
     for N in np.linspace(0.0, TURNS, sweep + 1)[1:]:
-        scene = der.Scene(rod, constraints=[der.clamp("start"),
+        loads = [der.end_force([0.0, 0.0, force])] if force else []
+        scene = der.Scene(rod, loads=loads, constraints=[der.clamp("start"),
                                             der.clamp("end", rotation=rotation_z(2 * np.pi * N), slide=2)],
                           contacts=[contact])
         start = state if steps and steps[-1] else rod.displaced(state, bump)
-        result = der.solve(scene, state=start, stability=False, max_iterations=5000, tol=tol)
+        try:
+            result = der.solve(scene, state=start, stability=False, max_iterations=5000, tol=tol,
+                               raise_on_failure=False)
+        except ValueError as exc:            # the start check: the last state is bent tighter than r
+            refused = f"N = {N:g}: {exc}"
+            break
         total += result.wall_time
         iters += result.iterations
         steps.append((result.contact or {}).get("n_contacts", 0))
@@ -217,7 +223,7 @@ def der_run(sweep, tol):
     x_pe = xs @ P
     frames_pe = frames @ P
     return {"wall_s": total, "iterations": iters, "converged": bool(result.converged), "status": result.status,
-            "sweep": sweep, "tol": tol, "contacts_per_step": steps, "positions": x_pe, "frames": frames_pe}
+            "refused": refused, "turns_reached": float(N) if refused is None else float(N) - TURNS / sweep, "sweep": sweep, "tol": tol, "force": force, "contacts_per_step": steps, "positions": x_pe, "frames": frames_pe}
 
 
 def _der_frames(rod, state):
@@ -237,6 +243,9 @@ def main(argv=None):
     ap.add_argument("--pyelastica-json", default=None, help="a finished PyElastica run (--out of an earlier run)")
     ap.add_argument("--sweep", type=int, default=40)
     ap.add_argument("--tol", type=float, default=1e-4)
+    ap.add_argument("--force", type=float, default=0.0,
+                    help="der only: a pulling force on the sliding end (PyElastica's case has none; with none der's "
+                         "continuation can reach a state bent tighter than r, which its start check refuses)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     if args.pyelastica_only:
@@ -245,7 +254,7 @@ def main(argv=None):
     import der
 
     der.warmup() if hasattr(der, "warmup") else None
-    dr = der_run(args.sweep, args.tol)
+    dr = der_run(args.sweep, args.tol, args.force)
     out = {"tool": "bench_plectoneme_pyelastica", "der": {k: v for k, v in dr.items()
                                                           if k not in ("positions", "frames")}}
     out["der"]["end"] = end_quantities(dr["positions"], dr["frames"])

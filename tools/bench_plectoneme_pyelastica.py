@@ -219,7 +219,8 @@ def der_run(sweep, tol, force=0.0):
     xs = state.positions                   # along z
     frames = np.stack([np.stack([d1, d2, t]) for d1, d2, t in zip(*_der_frames(rod, state))])
     # (x, y, z)_der -> the PyElastica lab: der's z is PyElastica's y; der's x -> PyElastica's z, der's y -> x
-    P = np.array([[0, 1, 0], [0, 0, 1], [1, 0, 0]], float)    # lab_pe = P^T-order: (y_d, z_d, x_d)
+    # x_pe = y_d, y_pe = z_d, z_pe = x_d (a cyclic permutation, det +1): rows of P are der's axes in PyElastica's
+    P = np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0]], float)
     x_pe = xs @ P
     frames_pe = frames @ P
     return {"wall_s": total, "iterations": iters, "converged": bool(result.converged), "status": result.status,
@@ -229,9 +230,11 @@ def der_run(sweep, tol, force=0.0):
 def _der_frames(rod, state):
     from der import diagnostics as dg
 
-    d1, d2 = dg.material_frame(rod, state)
+    from der.geometry import material_frames
+
     e = np.diff(state.positions, axis=0)
-    t = e / np.linalg.norm(e, axis=1, keepdims=True)
+    t = np.ascontiguousarray(e / np.linalg.norm(e, axis=1, keepdims=True))
+    d1, d2 = material_frames(state.q, t, state.d1)
     return d1, d2, t
 
 
@@ -255,6 +258,7 @@ def main(argv=None):
 
     der.warmup() if hasattr(der, "warmup") else None
     dr = der_run(args.sweep, args.tol, args.force)
+    print(json.dumps({k: v for k, v in dr.items() if k not in ("positions", "frames")}, default=float), file=sys.stderr)
     out = {"tool": "bench_plectoneme_pyelastica", "der": {k: v for k, v in dr.items()
                                                           if k not in ("positions", "frames")}}
     out["der"]["end"] = end_quantities(dr["positions"], dr["frames"])

@@ -270,15 +270,24 @@ def main(argv=None):
         frames = np.transpose(Q, (2, 0, 1))
         out["pyelastica"] = {k: pe[k] for k in ("final_time", "steps", "dt", "wall_s", "pyelastica")}
         out["pyelastica"]["end"] = end_quantities(x, frames)
-        out["ratio_pyelastica_over_der"] = pe["wall_s"] * (100.0 / pe["final_time"]) / dr["wall_s"]
+        out["pyelastica"]["complete"] = bool(pe.get("complete"))
+        if pe.get("complete") and dr["refused"] is None and dr["converged"]:
+            out["ratio_pyelastica_over_der"] = pe["wall_s"] / dr["wall_s"]
+        else:
+            # no like-for-like end states: no ratio (docs/contact.md section 8.5)
+            out["ratio_pyelastica_over_der"] = None
+            out["no_ratio_because"] = ("PyElastica's run stopped at t = %.3g of 100" % pe["final_time"]
+                                       if not pe.get("complete") else "der did not reach 10 turns")
     if args.json:
         print(json.dumps(out, indent=1, default=float))
     else:
         for k in ("der", "pyelastica"):
             if k in out:
                 print(k, {kk: vv for kk, vv in out[k].items() if kk != "log"})
-        if "ratio_pyelastica_over_der" in out:
+        if out.get("ratio_pyelastica_over_der"):
             print(f"PyElastica time / der time: {out['ratio_pyelastica_over_der']:.0f}")
+        elif "no_ratio_because" in out:
+            print(f"no ratio: {out['no_ratio_because']}")
     return 0
 
 

@@ -152,3 +152,22 @@ def test_independent_ring_energy_gradient_and_writhe():
     circle[0, 0], circle[5, 1] = 1.0, 1.0
     p = ring.parts(circle.ravel())
     assert abs(p["bend"] - np.pi) < 1e-10 and abs(p["writhe"]) < 1e-12
+
+
+def test_plectoneme_side_by_side_end_quantities_of_a_twisted_straight_rod():
+    """tools/bench_plectoneme_pyelastica.py judges both codes by the same end quantities: on a straight rod along
+    y twisted by 1.25 turns, Tw = 1.25, Wr = 0, Lk = 1.25, the extension is L and no strands come close."""
+    sys.path.insert(0, os.path.join(ROOT, "tools"))
+    import bench_plectoneme_pyelastica as b
+
+    rod = der.rod_from_shape(der.shapes.straight(b.L, b.N_ELEM), 1.0, 1.5)
+    turned = rod.displaced(rod.rest_state(), dtheta=2 * np.pi * 1.25 * (np.arange(rod.n_edges) + 0.5) / rod.n_edges)
+    d1, d2, t = b._der_frames(rod, turned)
+    P = np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0]], float)
+    frames = np.stack([np.stack(f) for f in zip(d1, d2, t)]) @ P
+    q = b.end_quantities(turned.positions @ P, frames)
+    assert q["twist"] == pytest.approx(1.25 * (1 - 1 / rod.n_edges), abs=1e-9)
+    # node to node: der's polygon is n h long with (n - 1) h = L (its end cross-sections, at the end edges'
+    # midpoints, are L apart)
+    assert abs(q["writhe"]) < 1e-9 and q["extension"] == pytest.approx(b.L * b.N_ELEM / (b.N_ELEM - 1), rel=1e-9)
+    assert q["min_distance"] > 2 * b.R

@@ -17,7 +17,9 @@ supports (der.clamp at the start; der.clamp("end", rotation, slide=1): the end c
 free to slide along y, no force), self-contact of radius r, twisted by a continuation of --sweep steps to 10
 turns, each step a static equilibrium (the implicit solver). PyElastica resolves a damped dynamics in time; der
 solves for equilibria, so the comparison is PyElastica's time to its final state against der's time to the
-equilibrium, both judged by the same end quantities computed by the same code here: Lk = Tw + Wr, Wr (der's
+equilibrium, both judged by the same end quantities computed by the same code here (one difference of setup:
+der's rod has its end cross-sections, the midpoints of its end edges, L apart, so its polygon is 150 L / 149 long
+node to node, PyElastica's L; the extension below is node to node): Lk = Tw + Wr, Wr (der's
 Gauss integral of the centreline closed by the extended closure of scenarios/plectoneme.py, axis y), Tw (sum
 of the twist angles between consecutive cross-section frames), the extension (end-to-end along y) and the
 smallest centreline distance of non-neighbour elements (over 2r it says whether the strands stay apart).

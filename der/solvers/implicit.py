@@ -35,6 +35,10 @@ from .system import (
 STALL_ITERATIONS = 6
 # contact: below this residual, after a full Newton step, the barrier Hessian is used unprojected
 EXACT_CONTACT_BELOW = 1e-4
+# contact: the Newton matrix reordered by reverse Cuthill-McKee and factorised as a band (der/contact/reorder.py)
+# while its bandwidth kl + ku stays at most this (measured: LAPACK's banded LU beats splu up to about 2 x 60)
+BANDED_CONTACT = True
+BANDED_CONTACT_MAX_WIDTH = 120
 FLOOR_STALL_ITERATIONS = 2      # enough once the residual is down at the round-off floor
 # pseudo-time step reductions (x0.1 each) before a step is declared impossible: enough to go from Newton's
 # method (dt up to 1e30) down to a step that only damps (dt ~ 1e-10); 12 near the round-off floor
@@ -267,21 +271,43 @@ def _coo_diagonal(coo, n):
 
 def _contact_solve(system, work, coo, R):
     """Solve (K + D/dt + H_contact) delta = R: the constrained band (fixed DOFs already identity rows and
-    columns, the pseudo-time diagonal included) plus the contact triplets off the fixed DOFs, as one CSC matrix
-    factorised by scipy's splu (SuperLU, COLAMD ordering). Returns (delta, info) like band_solve."""
+    columns, the pseudo-time diagonal included) plus the contact triplets off the fixed DOFs. The DOF blocks are
+    reordered by reverse Cuthill-McKee and the matrix factorised as a band by LAPACK (der/contact/reorder.py) while
+    the reordered bandwidth is at most BANDED_CONTACT_MAX_WIDTH; otherwise as one CSC matrix by scipy's splu
+    (SuperLU, COLAMD ordering). Returns (delta, info) like band_solve."""
     import scipy.sparse as sp
     from scipy.sparse.linalg import splu
 
     n = work.shape[1]
-    rb, cb, vb = band_to_coo(work, system.kl, system.ku, system.perm)
-    rows, cols, vals = [rb], [cb], [vb]
     fixed = system.fixed
+    rows, cols, vals = [], [], []
     for r, c, v in coo:
         keep = ~(fixed[r] | fixed[c])
         rows.append(r[keep])
         cols.append(c[keep])
         vals.append(v[keep])
-    A = sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+    rows, cols, vals = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
+    if BANDED_CONTACT:
+        from ..contact.reorder import banded_solve, bandwidths, block_order
+
+        # the contact pattern changes little from one Newton step to the next: keep the last ordering while the
+        # pattern's bandwidth in it stays within 1.25x of what RCM gave when it was computed
+        cached = getattr(system, "contact_order", None)
+        newpos = None
+        if cached is not None:
+            newpos, width = cached
+            kl2, ku2 = bandwidths(system.kl, system.ku, system.perm, rows, cols, newpos)
+            if kl2 + ku2 > 1.25 * width:
+                newpos = None
+        if newpos is None:
+            newpos, kl2, ku2 = block_order(work, system.kl, system.ku, system.perm, rows, cols)
+            system.contact_order = (newpos, kl2 + ku2)
+        if kl2 + ku2 <= BANDED_CONTACT_MAX_WIDTH:
+            system.linear_solves["sparse"] += 1
+            return banded_solve(work, system.kl, system.ku, system.perm, rows, cols, vals, R, newpos, kl2, ku2)
+    rb, cb, vb = band_to_coo(work, system.kl, system.ku, system.perm)
+    rows, cols, vals = np.concatenate([rb, rows]), np.concatenate([cb, cols]), np.concatenate([vb, vals])
+    A = sp.csc_matrix((vals, (rows, cols)), shape=(n, n))
     system.linear_solves["sparse"] += 1
     try:
         lu = splu(A, permc_spec="COLAMD")

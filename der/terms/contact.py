@@ -17,6 +17,9 @@ DHAT_FRACTION = 0.1
 # CCD: every gap keeps at least this fraction of its start value over a step
 MIN_GAP_FRACTION = 0.1
 KAPPA_RANGE = 100.0          # kappa_max / kappa_min
+# broad phase: candidate pairs are listed within dhat + VERLET_MARGIN r and reused while every node stays within
+# half that margin of where the list was built (a Verlet list; docs/contact.md, "Fewer broad phases")
+VERLET_MARGIN = 1.0
 # b''(dhat / 2) / 1 for the GAP barrier: (q + 2) q - 2 log(1/q) - 3 at q = zh / z = 2
 _B2_HALF = 8.0 + 2.0 * math.log(2.0) - 3.0
 
@@ -204,6 +207,31 @@ class BoundSelfContact(BoundBarrier):
         self.n_dof = rod.n_dof
         self.node_dof = 4 * np.arange(rod.n_nodes, dtype=np.int64)
         self._init_stiffness(term.kappa, system)
+        self.margin = VERLET_MARGIN * self.radius
+        self._list = None            # (positions where built, pairs within dhat + margin)
+        self.broad_phases = 0
+
+    def candidates(self, pos, pos1=None):
+        """Pairs that may be within dhat at pos (and, with pos1, anywhere on the straight step pos -> pos1).
+
+        A pair left out of a list built at x0 within dhat + margin had its boxes (inflated by r + (dhat +
+        margin) / 2) apart, so a gap > dhat + margin at x0; while every node stays within margin / 2 of x0 each
+        segment moves by at most margin / 2, the gap stays > dhat, and, the distance from x0 being convex along
+        a straight step, that holds on the whole step if it holds at both of its ends."""
+        if self._list is not None:
+            x0, pairs = self._list
+            move = float(np.abs(pos - x0).max())
+            if pos1 is not None:
+                move = max(move, float(np.abs(pos1 - x0).max()))
+            if np.sqrt(3.0) * move <= 0.5 * self.margin:
+                return pairs
+        self.broad_phases += 1
+        if pos1 is not None and np.sqrt(3.0) * float(np.abs(pos1 - pos).max()) > 0.5 * self.margin:
+            # a long step: its swept boxes, not listed for reuse
+            return self.C.candidate_pairs(pos, self.topo, self.dhat, pos1=pos1)
+        pairs = self.C.candidate_pairs(pos, self.topo, self.dhat + self.margin)
+        self._list = (pos.copy(), pairs)
+        return pairs if pos1 is None else self.candidates(pos, pos1)
 
     def check_start(self, state):
         curvature_radius_check(self.rod, state, self.radius, "der.self_contact")
@@ -229,7 +257,7 @@ class BoundSelfContact(BoundBarrier):
     def evaluate(self, state, order, grad, ab, coo):
         pos = self.positions(state)
         topo = self.topo
-        pairs = self.C.candidate_pairs(pos, topo, self.dhat)
+        pairs = self.candidates(pos)
         if order == 0:
             return float(self.A.pairs_energy(pos, topo.edges, pairs, topo.edge_radius, self.dhat, self.kappa))
         act = self.C.active_pairs(pos, topo.edges, pairs, topo.edge_radius, self.dhat)
@@ -255,10 +283,9 @@ class BoundSelfContact(BoundBarrier):
     def max_step(self, state, delta):
         pos = self.positions(state)
         dpos = np.ascontiguousarray(delta.reshape(-1, 4)[:self.n_nodes, :3])
-        try:
-            tau, _ = self.C.safe_step(pos, dpos, self.topo, self.dhat, MIN_GAP_FRACTION)
-        except ValueError:
-            return 0.0
+        pairs = self.candidates(pos, pos + dpos)
+        tau, worst, _ = self.C.pairs_ccd(pos, dpos, self.topo.edges, pairs, self.topo.edge_radius, MIN_GAP_FRACTION,
+                                         1e-6, 10000)
         return float(tau)
 
     def diagnostics(self, state):
@@ -418,6 +445,9 @@ class BoundRodContact(BoundSelfContact):
         self.n_dof = 4 * self.n_nodes
         self.node_dof = 4 * np.arange(self.n_nodes, dtype=np.int64)
         self._init_stiffness(term.kappa, system)
+        self.margin = VERLET_MARGIN * self.radius     # the Verlet list of BoundSelfContact.candidates
+        self._list = None
+        self.broad_phases = 0
 
     def rod_edge(self, e):
         """(rod, local edge) of the global edge e."""

@@ -1,0 +1,173 @@
+"""Issue 14 performance pieces: the reordered banded contact solve, the Verlet list of the self-contact broad
+phase, and the independent ring calculation's gradient (tools/ring_contact_check.py). Small n, no timings."""
+import os
+import sys
+
+import numpy as np
+import pytest
+
+import der
+from der.contact.reorder import banded_solve, bandwidths, block_order
+from der.contact.samples import plectoneme_polyline
+from der.linalg import band_layout, band_to_coo, new_band
+
+ROOT = os.path.join(os.path.dirname(__file__), "..")
+
+
+def _band_plus_contact(n_nodes, closed, seed):
+    """A random band (der's layout) with a dominant diagonal plus 12x12 blocks coupling the nodes of
+    plectoneme-like edge pairs (i with n - i)."""
+    rng = np.random.default_rng(seed)
+    kl, ku, perm = band_layout(n_nodes, closed)
+    n = 4 * n_nodes
+    ab = new_band(n, kl, ku)
+    off = kl + ku
+    for j in range(n):
+        for i in range(max(0, j - ku), min(n - 1, j + kl) + 1):
+            ab[off + i - j, j] = rng.standard_normal()
+        ab[off, j] += 40.0
+    rows, cols, vals = [], [], []
+    m = n_nodes - 1
+    for a in range(2, m // 2 - 3, 2):
+        b = m - 1 - a
+        d = np.array([4 * k + c for k in (a, a + 1, b, b + 1) for c in range(3)])
+        M = rng.standard_normal((12, 5))
+        H = M @ M.T
+        rows.append(np.repeat(d, 12))
+        cols.append(np.tile(d, 12))
+        vals.append(H.ravel())
+    return ab, kl, ku, perm, np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
+
+
+@pytest.mark.parametrize("closed", [False, True])
+def test_reordered_banded_solve_equals_a_dense_solve(closed):
+    import scipy.sparse as sp
+
+    ab, kl, ku, perm, rows, cols, vals = _band_plus_contact(60, closed, 3)
+    n = ab.shape[1]
+    rb, cb, vb = band_to_coo(ab, kl, ku, perm)
+    A = sp.csr_matrix((np.concatenate([vb, vals]), (np.concatenate([rb, rows]), np.concatenate([cb, cols]))),
+                      shape=(n, n)).toarray()
+    rhs = np.random.default_rng(4).standard_normal(n)
+    newpos, kl2, ku2 = block_order(ab, kl, ku, perm, rows, cols)
+    assert sorted(newpos) == list(range(n))
+    x, info = banded_solve(ab, kl, ku, perm, rows, cols, vals, rhs, newpos, kl2, ku2)
+    assert info == 0
+    assert np.allclose(x, np.linalg.solve(A, rhs), rtol=1e-10, atol=1e-12)
+    # a bandwidth computed for another ordering is what that ordering needs (the solver's reuse test)
+    assert bandwidths(kl, ku, perm, rows, cols, newpos) == (kl2, ku2)
+    # the ladder of a plectoneme is far narrower in RCM order than in the DOF order
+    ident = np.arange(n, dtype=np.int64)
+    assert sum(bandwidths(kl, ku, perm, rows, cols, ident)) > 2 * (kl2 + ku2)
+
+
+def test_contact_solve_paths_agree_on_a_supercoiled_ring():
+    """The twisted ring of scenarios/twisted_ring.py in self-contact (a closed rod: der's interleaved band
+    layout) solved with the banded (RCM) contact path and with splu: the same equilibrium (energy, writhe, contacts;
+    a free ring's iterates differ along its rigid-body modes, which the pseudo-time term barely fixes)."""
+    from der import diagnostics as dg
+
+    import argparse
+
+    import der.solvers.implicit as implicit
+
+    sys.path.insert(0, os.path.join(ROOT, "scenarios"))
+    from twisted_ring import make_rod, start_state
+
+    base, _ = make_rod(argparse.Namespace(a0=1.0, n=48, A1=1.0, A2=1.0 / 0.67, kappa0=0.0))
+    state, welded = base.rest_state(), 0.0
+    for tw in (4.0, 8.0):
+        rod = base.with_imposed_twist(tw)
+        r = der.solve(der.Scene(rod, contacts=[der.self_contact(0.05)]), state=start_state(rod, state, welded, tw, 0.01, 1.0),
+                      stability=False)
+        state, welded = r.state, tw
+    assert r.contact["n_contacts"] > 0
+    rod = base.with_imposed_twist(9.0)
+    out = {}
+    for banded in (True, False):
+        implicit.BANDED_CONTACT = banded
+        try:
+            r = der.solve(der.Scene(rod, contacts=[der.self_contact(0.05)]), state=start_state(rod, state, 8.0, 9.0, 0.0, 1.0),
+                          stability=False)
+        finally:
+            implicit.BANDED_CONTACT = True
+        assert r.converged and r.linear_solves["sparse"] > 0
+        out[banded] = (sum(r.energy.values()), dg.linking_number(rod, r.state)[2], r.contact["n_contacts"])
+    assert out[True][0] == pytest.approx(out[False][0], rel=1e-7)
+    assert out[True][1] == pytest.approx(out[False][1], abs=1e-6)
+    assert out[True][2] == out[False][2]
+
+
+def _line(n):
+    """An open rod laid out as a plectoneme-like polyline whose strands are well apart (for the broad phase)."""
+    x = plectoneme_polyline(n, h=0.25, rho=0.5, pitch=0.1)
+    rod = der.rod_from_shape(der.shapes.straight(0.25 * n, n), 1.0, 1.5, EA=1e4)
+    return rod, rod.displaced(rod.rest_state(), x - x[0] - rod.rest_state().positions)
+
+
+def test_verlet_list_holds_every_pair_within_dhat():
+    """The self-contact term's reused candidate list (built within dhat + margin) holds every pair a fresh broad
+    phase finds within dhat, for moves up to the margin's reuse limit, and is rebuilt beyond it."""
+    from der.contact import candidate_pairs
+
+    rod, start = _line(120)
+    scene = der.Scene(rod, constraints=[der.clamp("start")], contacts=[der.self_contact(0.45)])
+    from der.solvers.options import SolverOptions
+    from der.solvers.system import build_system, prepare_state
+
+    system = build_system(scene, SolverOptions())
+    state = prepare_state(system, start)
+    term = system.terms[0]
+    pos = term.positions(state)
+    term.candidates(pos)
+    assert term.broad_phases == 1
+    rng = np.random.default_rng(0)
+    limit = 0.5 * term.margin / np.sqrt(3.0)
+    for _ in range(20):
+        moved = pos + rng.uniform(-limit, limit, pos.shape) * 0.999
+        listed = {tuple(p) for p in term.candidates(moved)}
+        fresh = {tuple(p) for p in candidate_pairs(moved, term.topo, term.dhat)}
+        gaps_fresh = term._pair_data(moved, np.array(sorted(fresh)))[0] if fresh else np.array([])
+        within = {p for p, g in zip(sorted(fresh), gaps_fresh) if g < term.dhat}
+        assert within <= listed
+    assert term.broad_phases == 1            # all reused
+    term.candidates(pos + 2 * term.margin)
+    assert term.broad_phases == 2            # moved beyond the margin: rebuilt
+
+
+def test_independent_ring_energy_gradient_and_writhe():
+    sys.path.insert(0, os.path.join(ROOT, "tools"))
+    from ring_contact_check import Ring
+
+    ring = Ring(5, 64, 0.3, 2.0)
+    rng = np.random.default_rng(1)
+    c = np.zeros((10, 3))
+    c[0, 0], c[5, 1] = 1.0, 1.0
+    c += 0.2 * rng.standard_normal(c.shape)
+    g, g_fd = ring.grad(c.ravel(), 1e3), ring.grad_fd(c.ravel(), 1e3)
+    assert np.abs(g - g_fd).max() <= 1e-6 * np.abs(g_fd).max()
+    assert ring.parts(c.ravel())["overlap"] > 0         # the contact penalty's gradient is exercised
+    # a planar circle: bending energy A1 pi / a0 (length 2 pi), writhe 0
+    circle = np.zeros((10, 3))
+    circle[0, 0], circle[5, 1] = 1.0, 1.0
+    p = ring.parts(circle.ravel())
+    assert abs(p["bend"] - np.pi) < 1e-10 and abs(p["writhe"]) < 1e-12
+
+
+def test_plectoneme_side_by_side_end_quantities_of_a_twisted_straight_rod():
+    """tools/bench_plectoneme_pyelastica.py judges both codes by the same end quantities: on a straight rod along
+    y twisted by 1.25 turns, Tw = 1.25, Wr = 0, Lk = 1.25, the extension is L and no strands come close."""
+    sys.path.insert(0, os.path.join(ROOT, "tools"))
+    import bench_plectoneme_pyelastica as b
+
+    rod = der.rod_from_shape(der.shapes.straight(b.L, b.N_ELEM), 1.0, 1.5)
+    turned = rod.displaced(rod.rest_state(), dtheta=2 * np.pi * 1.25 * (np.arange(rod.n_edges) + 0.5) / rod.n_edges)
+    d1, d2, t = b._der_frames(rod, turned)
+    P = np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0]], float)
+    frames = np.stack([np.stack(f) for f in zip(d1, d2, t)]) @ P
+    q = b.end_quantities(turned.positions @ P, frames)
+    assert q["twist"] == pytest.approx(1.25 * (1 - 1 / rod.n_edges), abs=1e-9)
+    # node to node: der's polygon is n h long with (n - 1) h = L (its end cross-sections, at the end edges'
+    # midpoints, are L apart)
+    assert abs(q["writhe"]) < 1e-9 and q["extension"] == pytest.approx(b.L * b.N_ELEM / (b.N_ELEM - 1), rel=1e-9)
+    assert q["min_distance"] > 2 * b.R

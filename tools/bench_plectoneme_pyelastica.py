@@ -1,0 +1,297 @@
+"""PyElastica's plectoneme example side by side with der (issue 14, scenario 4).
+
+    python tools/bench_plectoneme_pyelastica.py [--json] [--pyelastica-json FILE] [--der-only] [--final-time 100]
+    /work/venv-bench/bin/python tools/bench_plectoneme_pyelastica.py --pyelastica-only --out FILE  (the long run)
+
+The rod and twist of PyElastica 1.0's self-contact plectoneme case (parameters in the issue's anchor; this is our
+own run of them, not PyElastica's example code): 150 elements, L = 1, r = 0.025, E = 1e6, G = E / 1.5, total
+mass 1, along +y from the origin; the start clamped; the far end's x and z held at 0, y free (no force), its
+directors turned about the axis at a constant rate for 50 time units to 10 turns, then held; relaxation to
+t = 100 (dt = 0.0025 L / 150: ~6.0 million PositionVerlet steps); AnalyticalLinearDamper with
+damping_constant nu = 2 / density / (pi r^2) (= 2); SelfContact(k = 1e4, nu = 10); a kick of -1e-4 added to the
+z velocity of the middle node at the start and at every step of the twisting phase (our reading of "a kick
+during the twisting").
+
+der: the same rod (A1 = E pi r^4 / 4, A2 = G pi r^4 / 2, EA = E pi r^2, extensible, n = 150 edges), the same
+supports (der.clamp at the start; der.clamp("end", rotation, slide=1): the end cross-section turned about y and
+free to slide along y, no force), self-contact of radius r, twisted by a continuation of --sweep steps to 10
+turns, each step a static equilibrium (the implicit solver). PyElastica resolves a damped dynamics in time; der
+solves for equilibria, so the comparison is PyElastica's time to its final state against der's time to the
+equilibrium, both judged by the same end quantities computed by the same code here (one difference of setup:
+der's rod has its end cross-sections, the midpoints of its end edges, L apart, so its polygon is 150 L / 149 long
+node to node, PyElastica's L; the extension below is node to node): Lk = Tw + Wr, Wr (der's
+Gauss integral of the centreline closed by the extended closure of scenarios/plectoneme.py, axis y), Tw (sum
+of the twist angles between consecutive cross-section frames), the extension (end-to-end along y) and the
+smallest centreline distance of non-neighbour elements (over 2r it says whether the strands stay apart).
+"""
+import argparse
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, ".."))
+
+N_ELEM, L, R, E = 150, 1.0, 0.025, 1e6
+G = E / 1.5
+TURNS = 10
+DENSITY = 1.0 / (np.pi * R * R * L)
+NU = 2.0 / DENSITY / (np.pi * R * R)
+DT = 0.0025 * L / N_ELEM
+TWIST_TIME = 5.0 * TURNS
+K_CONTACT, NU_CONTACT = 1e4, 10.0
+KICK = -1e-4
+A1 = E * np.pi * R ** 4 / 4
+A2 = G * np.pi * R ** 4 / 2
+EA = E * np.pi * R ** 2
+VENV = "/work/venv-bench/bin/python"
+
+
+# ---- PyElastica (run in the venv that has it) ------------------------------------------------------------
+
+def pyelastica_run(final_time, out, every=20000):
+    import elastica as ea
+
+    class Sim(ea.BaseSystemCollection, ea.Constraints, ea.Damping, ea.Contact, ea.CallBacks):
+        pass
+
+    class TurnEnd(ea.ConstraintBase):
+        """Start: node 0 and element 0 fixed. End: node -1 held at x = z = 0 (y free), element -1's directors
+        turned about +y at a constant rate until TURNS turns, then held; the middle node kicked in z."""
+
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            rod = self._system
+            self.x0 = rod.position_collection[:, 0].copy()
+            self.Q0 = rod.director_collection[..., 0].copy()
+            self.Qend = rod.director_collection[..., -1].copy()
+            self.omega = 2 * np.pi * TURNS / TWIST_TIME
+            self.mid = N_ELEM // 2
+
+        def constrain_values(self, system, time):
+            rod = system
+            rod.position_collection[:, 0] = self.x0
+            rod.director_collection[..., 0] = self.Q0
+            rod.position_collection[0, -1] = 0.0
+            rod.position_collection[2, -1] = 0.0
+            phi = self.omega * min(time, TWIST_TIME)
+            c, s = np.cos(phi), np.sin(phi)
+            Ry = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])     # rotation by phi about +y
+            rod.director_collection[..., -1] = self.Qend @ Ry.T                # rows d_i -> R d_i
+
+        def constrain_rates(self, system, time):
+            rod = system
+            rod.velocity_collection[:, 0] = 0.0
+            rod.omega_collection[:, 0] = 0.0
+            rod.velocity_collection[0, -1] = 0.0
+            rod.velocity_collection[2, -1] = 0.0
+            rod.omega_collection[:, -1] = 0.0
+            if time < TWIST_TIME:
+                rod.omega_collection[2, -1] = self.omega      # material frame: d3 is the rod axis
+                rod.velocity_collection[2, self.mid] += KICK
+
+    sim = Sim()
+    rod = ea.CosseratRod.straight_rod(N_ELEM, np.zeros(3), np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0]),
+                                      L, R, DENSITY, youngs_modulus=E, shear_modulus=G)
+    sim.append(rod)
+    sim.constrain(rod).using(TurnEnd, constrained_position_idx=(0, -1), constrained_director_idx=(0, -1))
+    sim.dampen(rod).using(ea.AnalyticalLinearDamper, damping_constant=NU, time_step=DT)
+    sim.detect_contact_between(rod, rod).using(ea.RodSelfContact, k=K_CONTACT, nu=NU_CONTACT)
+    sim.finalize()
+    rod.velocity_collection[2, N_ELEM // 2] += KICK
+    stepper = ea.PositionVerlet()
+    steps = int(round(final_time / DT))
+    t, log = 0.0, []
+    t0 = time.perf_counter()
+    for k in range(steps):
+        t = stepper.step(sim, t, DT)
+        if (k + 1) % every == 0:
+            log.append({"t": t, "wall": time.perf_counter() - t0,
+                        "speed": float(np.abs(rod.velocity_collection).max()),
+                        "extension": float(rod.position_collection[1, -1] - rod.position_collection[1, 0])})
+            if not np.isfinite(rod.position_collection).all():
+                break
+            print(json.dumps(log[-1]), file=sys.stderr, flush=True)
+            _snapshot(out, rod, t, k + 1, time.perf_counter() - t0, log, complete=False)
+    return _snapshot(out, rod, t, k + 1, time.perf_counter() - t0, log, complete=(k + 1 == steps))
+
+
+def _snapshot(out, rod, t, steps, wall, log, complete):
+    """Write the state reached (a long run may be stopped before its final time: the snapshot says so)."""
+    import importlib.metadata
+
+    res = {"final_time": t, "steps": steps, "dt": DT, "wall_s": wall, "log": log, "complete": complete,
+           "positions": rod.position_collection.T.tolist(), "directors": rod.director_collection.tolist(),
+           "pyelastica": importlib.metadata.version("pyelastica")}
+    with open(out + ".tmp", "w") as f:
+        json.dump(res, f)
+    os.replace(out + ".tmp", out)
+    return res
+
+
+# ---- the end quantities, the same code for both --------------------------------------------------------
+
+def _rotation_angle_about(Qa, Qb):
+    """Twist angle from frame Qa to frame Qb (rows d1, d2, d3) about their mean axis: the d3 component of the
+    rotation vector of Qb Qa^T expressed in the material frame."""
+    from der import diagnostics as dg
+
+    Rm = Qb @ Qa.T                       # maps Qa's rows (in lab coordinates) ... in the material frame of a
+    v = dg.rotation_vector(Rm.T)
+    return float(v[2])
+
+
+def end_quantities(x, frames):
+    """x (n_nodes, 3) centreline, frames (n_edges, 3, 3) rows d1, d2, d3 (d3 along the edge). Axis y."""
+    from der import diagnostics as dg
+    from der.contact import topology, exclusion_k  # noqa: F401
+    from scenarios.plectoneme import closed_writhe
+
+    # rotate the lab frame so that the axis y becomes z (cyclic permutation, det +1): (x, y, z) -> (z, x, y)
+    xr = np.ascontiguousarray(x[:, [2, 0, 1]])
+    wr = closed_writhe(xr, L)
+    # twist: sum over consecutive frames of the angle about the tangent after parallel transport
+    tw = 0.0
+    for k in range(len(frames) - 1):
+        a, b = frames[k], frames[k + 1]
+        t0, t1 = a[2], b[2]
+        # parallel transport of a's d1 onto b's tangent
+        axis = np.cross(t0, t1)
+        s, c = np.linalg.norm(axis), float(t0 @ t1)
+        d1 = a[0]
+        if s > 1e-15:
+            k_ = axis / s
+            ang = np.arctan2(s, c)
+            d1 = d1 * np.cos(ang) + np.cross(k_, d1) * np.sin(ang) + k_ * (k_ @ d1) * (1 - np.cos(ang))
+        tw += np.arctan2(float(np.cross(d1, b[0]) @ t1), float(d1 @ b[0]))
+    tw /= 2 * np.pi
+    # the smallest centreline distance of non-neighbour edges (brute force, 150 edges)
+    from der.contact.distance import segment_distance2
+
+    ne = x.shape[0] - 1
+    kx = int(np.ceil((np.pi * R + 0.1 * R) / (L / N_ELEM)))
+    dmin = np.inf
+    for i in range(ne):
+        for j in range(i + kx + 1, ne):
+            d = np.sqrt(segment_distance2(np.concatenate([x[i], x[i + 1], x[j], x[j + 1]])))
+            dmin = min(dmin, d)
+    return {"twist": tw, "writhe": wr, "linking_number": tw + wr, "extension": float(x[-1, 1] - x[0, 1]),
+            "min_distance": float(dmin), "min_distance_over_2r": float(dmin / (2 * R))}
+
+
+# ---- der ---------------------------------------------------------------------------------------------------
+
+def der_run(sweep, tol, force=0.0):
+    import der
+    from der import diagnostics as dg  # noqa: F401
+
+    x = np.zeros((N_ELEM + 1, 3))
+    x[:, 1] = np.linspace(0.0, L, N_ELEM + 1)
+    rod = der.rod_from_shape(der.shapes.straight(L, N_ELEM), A1, A2, EA=EA)
+    # der's straight shape runs along z: rotate the lab so that it runs along y (only for the report below)
+    contact = der.self_contact(R)
+    state = rod.rest_state()
+    xi = rod.rest_q.reshape(-1, 4)[:, 2] / L
+    bump = np.zeros((rod.n_nodes, 3))
+    bump[:, 0] = 1e-3 * L * np.sin(np.pi * np.clip(xi, 0, 1))
+    from scenarios.plectoneme import rotation_z
+
+    total, iters, steps, refused = 0.0, 0, [], None
+    for N in np.linspace(0.0, TURNS, sweep + 1)[1:]:
+        loads = [der.end_force([0.0, 0.0, force])] if force else []
+        scene = der.Scene(rod, loads=loads, constraints=[der.clamp("start"),
+                                            der.clamp("end", rotation=rotation_z(2 * np.pi * N), slide=2)],
+                          contacts=[contact])
+        start = state if steps and steps[-1] else rod.displaced(state, bump)
+        try:
+            result = der.solve(scene, state=start, stability=False, max_iterations=5000, tol=tol,
+                               raise_on_failure=False)
+        except ValueError as exc:            # the start check: the last state is bent tighter than r
+            refused = f"N = {N:g}: {exc}"
+            break
+        total += result.wall_time
+        iters += result.iterations
+        steps.append((result.contact or {}).get("n_contacts", 0))
+        if not result.converged:
+            break
+        state = result.state
+    xs = state.positions                   # along z
+    frames = np.stack([np.stack([d1, d2, t]) for d1, d2, t in zip(*_der_frames(rod, state))])
+    # (x, y, z)_der -> the PyElastica lab: der's z is PyElastica's y; der's x -> PyElastica's z, der's y -> x
+    # x_pe = y_d, y_pe = z_d, z_pe = x_d (a cyclic permutation, det +1): rows of P are der's axes in PyElastica's
+    P = np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0]], float)
+    x_pe = xs @ P
+    frames_pe = frames @ P
+    return {"wall_s": total, "iterations": iters, "converged": bool(result.converged), "status": result.status,
+            "refused": refused, "turns_reached": float(N) if refused is None else float(N) - TURNS / sweep, "sweep": sweep, "tol": tol, "force": force, "contacts_per_step": steps, "positions": x_pe, "frames": frames_pe}
+
+
+def _der_frames(rod, state):
+    from der import diagnostics as dg
+
+    from der.geometry import material_frames
+
+    e = np.diff(state.positions, axis=0)
+    t = np.ascontiguousarray(e / np.linalg.norm(e, axis=1, keepdims=True))
+    d1, d2 = material_frames(state.q, t, state.d1)
+    return d1, d2, t
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--pyelastica-only", action="store_true", help="run PyElastica (needs it) and write --out")
+    ap.add_argument("--out", default="/tmp/pyelastica_plectoneme.json")
+    ap.add_argument("--final-time", type=float, default=100.0)
+    ap.add_argument("--pyelastica-json", default=None, help="a finished PyElastica run (--out of an earlier run)")
+    ap.add_argument("--sweep", type=int, default=40)
+    ap.add_argument("--tol", type=float, default=1e-4)
+    ap.add_argument("--force", type=float, default=0.0,
+                    help="der only: a pulling force on the sliding end (PyElastica's case has none; with none der's "
+                         "continuation can reach a state bent tighter than r, which its start check refuses)")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args(argv)
+    if args.pyelastica_only:
+        pyelastica_run(args.final_time, args.out)
+        return 0
+    import der
+
+    der.warmup() if hasattr(der, "warmup") else None
+    dr = der_run(args.sweep, args.tol, args.force)
+    print(json.dumps({k: v for k, v in dr.items() if k not in ("positions", "frames")}, default=float), file=sys.stderr)
+    out = {"tool": "bench_plectoneme_pyelastica", "der": {k: v for k, v in dr.items()
+                                                          if k not in ("positions", "frames")}}
+    out["der"]["end"] = end_quantities(dr["positions"], dr["frames"])
+    if args.pyelastica_json:
+        with open(args.pyelastica_json) as f:
+            pe = json.load(f)
+        x = np.array(pe["positions"])
+        Q = np.array(pe["directors"])                       # (3, 3, n_elem): rows d1, d2, d3
+        frames = np.transpose(Q, (2, 0, 1))
+        out["pyelastica"] = {k: pe[k] for k in ("final_time", "steps", "dt", "wall_s", "pyelastica")}
+        out["pyelastica"]["end"] = end_quantities(x, frames)
+        out["pyelastica"]["complete"] = bool(pe.get("complete"))
+        if pe.get("complete") and dr["refused"] is None and dr["converged"]:
+            out["ratio_pyelastica_over_der"] = pe["wall_s"] / dr["wall_s"]
+        else:
+            # no like-for-like end states: no ratio (docs/contact.md section 8.5)
+            out["ratio_pyelastica_over_der"] = None
+            out["no_ratio_because"] = ("PyElastica's run stopped at t = %.3g of 100" % pe["final_time"]
+                                       if not pe.get("complete") else "der did not reach 10 turns")
+    if args.json:
+        print(json.dumps(out, indent=1, default=float))
+    else:
+        for k in ("der", "pyelastica"):
+            if k in out:
+                print(k, {kk: vv for kk, vv in out[k].items() if kk != "log"})
+        if out.get("ratio_pyelastica_over_der"):
+            print(f"PyElastica time / der time: {out['ratio_pyelastica_over_der']:.0f}")
+        elif "no_ratio_because" in out:
+            print(f"no ratio: {out['no_ratio_because']}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -152,13 +152,7 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
             from .stability import stability
 
             stability(system, result, options.n_eigenvalues)
-        result.compile_time = compile_time
-        result.tol = options.tol
-        result.linear_solves = dict(system.linear_solves)
-        if system.terms:
-            from ..diagnostics import contact_forces
-
-            result.contact = contact_forces(system, result.state)
+        _annotate(system, result, options, compile_time)
         if recorder is not None:
             recorder.log_final(result)
     finally:
@@ -167,6 +161,17 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
     if not result.converged and raise_on_failure:
         raise ConvergenceError(result)
     return result
+
+
+def _annotate(system, result, options, compile_time):
+    """What every solve's result carries beside the solver's verdict: compile time, tol, linear solves, contact."""
+    result.compile_time = compile_time
+    result.tol = options.tol
+    result.linear_solves = dict(system.linear_solves)
+    if system.terms:
+        from ..diagnostics import contact_forces
+
+        result.contact = contact_forces(system, result.state)
 
 
 def _solve_several(scene, state, solver, options, record, raise_on_failure):
@@ -223,13 +228,7 @@ def _solve_several(scene, state, solver, options, record, raise_on_failure):
             warnings.warn(f"{solver} solve: {result.message}", RoundoffFloorWarning, stacklevel=3)
         if result.converged and options.stability:
             _stability_several(system, result, options.n_eigenvalues)
-        result.compile_time = compile_time
-        result.tol = options.tol
-        result.linear_solves = dict(system.linear_solves)
-        if system.terms:
-            from ..diagnostics import contact_forces
-
-            result.contact = contact_forces(system, result.state)
+        _annotate(system, result, options, compile_time)
         if recorder is not None:
             recorder.log_final(result)
     finally:

@@ -38,6 +38,9 @@ FLOOR_STALL_ITERATIONS = 2      # enough once the residual is down at the round-
 # pseudo-time step reductions (x0.1 each) before a step is declared impossible: enough to go from Newton's
 # method (dt up to 1e30) down to a step that only damps (dt ~ 1e-10); 12 near the round-off floor
 MAX_SHRINKS = 40
+# the band path factorises the Jacobian in place (False: copy it before each attempt, as the contact path does;
+# kept for the test that both end bitwise the same)
+IN_PLACE = True
 
 
 def shrink(dt, options):
@@ -160,7 +163,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 status, message = "time_budget", f"time budget of {options.time_budget:g} s used up"
                 break
             it += 1
-            in_place = not system.terms
+            in_place = IN_PLACE and not system.terms
             if not in_place:
                 if ab_K is None:
                     ab_K, work = np.empty_like(system.ab), np.empty_like(system.ab)

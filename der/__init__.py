@@ -1,6 +1,7 @@
 """der: discrete elastic rods with natural curvature and twist (Drozdov & Rabin), compiled with numba.
 
-Build a rod from a shape (``rod_from_shape(shapes.helix(...), A1, A2)``), put it in a ``Scene`` with loads
+Build a rod from a rest description and a start (``rod(rest=shapes.helix(...), start="straight", A1=..., A2=...)``,
+or ``rod_from_shape(shapes.helix(...), A1, A2)`` for rest = start = the shape), put it in a ``Scene`` with loads
 (``point_force``, ``end_force``, ``distributed_force``, ``end_torque``, ``twisting_moment``, ``point_torque``,
 ``follower_force``) and constraints (``clamp``, ``hinge``, ``roller``, ``pin``, ``fix_theta``), relax it with
 ``solve``; read the paper's variables with ``diagnostics``.
@@ -14,13 +15,13 @@ Example
 >>> der.solve(scene).converged
 True
 """
-from . import diagnostics, shapes
+from . import diagnostics, sections, shapes
 from .constraints import clamp, fix_theta, hinge, pin, roller
 from .continuation import Branch, continuation
 from .loads import (
     distributed_force, end_force, end_torque, follower_force, point_force, point_torque, twisting_moment,
 )
-from .rod import Rod, RodState, rod_from_shape
+from .rod import Rod, RodState, rod, rod_from_shape   # der.rod is the constructor (the module: sys.modules)
 from .scene import Scene
 from .terms.contact import rod_contact, self_contact
 from .terms.obstacles import cylinder, plane, sphere
@@ -29,12 +30,16 @@ from .solvers import (
 )
 from .sweep import SweepResult, sweep
 from .warmup import warmup
+from . import dynamics
+from .dynamics import Damping, Trajectory, simulate
 
 __all__ = [
-    "shapes", "diagnostics", "solve", "check_stability", "warmup", "SolverOptions", "SolveResult", "ConvergenceError",
-    "RoundoffFloorWarning", "LockedRodWarning", "Rod", "RodState", "rod_from_shape", "Scene",
+    "shapes", "sections", "diagnostics", "solve", "check_stability", "warmup", "SolverOptions", "SolveResult",
+    "ConvergenceError",
+    "RoundoffFloorWarning", "LockedRodWarning", "Rod", "RodState", "rod", "rod_from_shape", "Scene",
     "clamp", "hinge", "roller", "pin", "fix_theta", "point_force", "end_force", "distributed_force", "end_torque",
     "twisting_moment", "point_torque", "follower_force",
     "self_contact", "rod_contact", "plane", "sphere", "cylinder",
     "continuation", "Branch", "sweep", "SweepResult",
+    "simulate", "Damping", "Trajectory", "dynamics",
 ]

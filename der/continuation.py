@@ -25,6 +25,15 @@ eigenvalue is complex). Both are located by a secant (Illinois) search on the ar
 of dp/ds for a fold, of the lowest eigenvalue for a bifurcation. ``Branch.switch`` starts the bifurcated
 branch along the critical eigenvector.
 
+Contact: while contact pairs are active the stiffness couples distant DOFs; each Newton step then factorises
+the constrained band plus the contact Hessian's triplets as one sparse matrix (SuperLU, as the implicit solver
+does), and K a = R, K b = R_p are solved with it (``Branch.sparse_factorisations`` counts them). The barrier
+keeps the strands apart as long as no Newton step jumps across it; a step that would (a non-finite energy)
+fails and is halved. Not handled: active contact on a rod whose end supports link DOFs (sliding clamps, pins).
+
+Held DOFs (clamps, prescribed rotations) are put where scene_of(p)'s targets put them at every iterate, never
+extrapolated along a linear step: a clamp keeps its end edge's length, which a linear turn would stretch.
+
 ``method="natural"`` is the simpler natural-parameter continuation: p steps, each point a ``der.solve`` warm
 started from a secant predictor. It stops at a fold.
 """
@@ -44,6 +53,7 @@ KINDS = ("fold", "bifurcation", "hopf")
 GAUGE_REGULARISATION = 1e-12   # times diag|K|, only when the rod has free rigid motions (they are projected out)
 GAUGE_TOL = 1e-6               # |K v| <= GAUGE_TOL |K| |v|: a rigid motion the stiffness annihilates
 DENSE_EIGENVECTOR_MAX_DOFS = 2400
+GAUGE_ANGLE_WEIGHT = 1e-8        # rigid motions are fitted on the node coordinates (Problem.gauge_coordinates)
 TANGENT_COS = 0.9              # a step whose tangent turns by more than acos(0.9) = 26 degrees is halved
 
 
@@ -54,8 +64,9 @@ class Branch:
     ----------
     parameter : the parameter's name (a column of the table).
     points : list of dicts, one per equilibrium on the branch: the parameter, ``s`` (arclength, dimensionless),
-        ``dp_ds``, the user's summaries, ``min_eigenvalue``, ``stable``, ``flutter``, ``residual``,
-        ``newton_iterations``.
+        ``dp_ds``, the user's summaries, ``residual``, ``newton_iterations`` (Newton steps and multiplier
+        updates of the corrector), ``min_eigenvalue``, ``stable``, ``flutter`` and ``stability_time`` (seconds
+        of the eigenvalue computation at that point).
     states : the RodState of each point (empty if ``keep_states=False``).
     special : list of dicts: the located special points, each with ``kind`` ("fold", "bifurcation" or "hopf"),
         the parameter, ``index`` (it lies between points index - 1 and index), ``s``, ``min_eigenvalue``,
@@ -63,7 +74,8 @@ class Branch:
     status : "completed" (reached a bound or the stop condition), "max_steps", "time_budget", "step_too_small"
         (the corrector failed down to ``ds_min``: a turning point the natural method cannot pass, or no
         equilibrium nearby), "interrupted"; message : why, in words.
-    wall_time : seconds.
+    wall_time : seconds. sparse_factorisations : how many bordered Newton steps factorised the sparse K of an
+    active contact (band + contact Hessian, SuperLU) instead of the band.
 
     ``table()`` gives the columns, ``to_csv``/``to_json`` write them, ``plot`` a PNG bifurcation diagram,
     ``record`` a rerun recording of the path, ``switch`` the branch that bifurcates at a special point.
@@ -73,6 +85,7 @@ class Branch:
         self.parameter = parameter
         self.points, self.states, self.special = [], [], []
         self.status, self.message, self.wall_time = "", "", 0.0
+        self.sparse_factorisations = 0
         self._settings = settings
 
     def __repr__(self):
@@ -310,6 +323,7 @@ class _Problem:
         self._systems = {}
         self.n = None
         self.weights = None
+        self.sparse_factorisations = 0
 
     def scene(self, p):
         scene = self.scene_of(float(p))
@@ -347,7 +361,9 @@ class _Problem:
         """A copy of ``state`` with scene_of(p)'s constraint targets applied (frames transported)."""
         from .solvers.system import prepare_state
 
-        return prepare_state(self.system(p), state)
+        sys_ = self.system(p)
+        carry_penalty(sys_, state)
+        return prepare_state(sys_, state)
 
     def inner(self, u, v):
         return float(np.sum(self.weights * u[:-1] * v[:-1]) + self.w_p * u[-1] * v[-1])
@@ -356,17 +372,22 @@ class _Problem:
         return math.sqrt(self.inner(u, u))
 
     def residual(self, p, state):
-        """(R, residual norm, strain ok) at ``state`` for scene_of(p) (evaluates the system)."""
+        """(R, residual norm, strain ok, the elongation as a residual) at ``state`` for scene_of(p) (evaluates
+        the system)."""
         from .solvers.system import (
-            evaluate_system, load_scales, max_strain, residual_norm, residual_vector,
+            constraint_residual, evaluate_system, load_scales, max_strain, residual_norm, residual_vector,
         )
 
         sys_ = self.system(p)
+        carry_penalty(sys_, state)
         evaluate_system(sys_, state, 1)
         R = residual_vector(sys_)
-        res = residual_norm(sys_, R, load_scales(sys_, state))
-        strain_ok = (max_strain(sys_, state) <= self.options.effective_strain_tol) if sys_.rod.inextensible else True
-        return R, res, strain_ok
+        scales = load_scales(sys_, state)
+        res = residual_norm(sys_, R, scales)
+        if not sys_.rod.inextensible:
+            return R, res, True, 0.0
+        strain_ok = max_strain(sys_, state) <= self.options.effective_strain_tol
+        return R, res, strain_ok, constraint_residual(sys_, state, scales)
 
     def dR_dp(self, p, state):
         """(dR/dp at fixed free DOFs, dq_fixed/dp): central differences; the constraint targets move with p."""
@@ -391,9 +412,7 @@ class _Problem:
 
         sys_ = self.system(p)
         evaluate_system(sys_, state, 2)
-        if getattr(sys_, "contact_coo", None):
-            raise ValueError("der.continuation: contact is active at this point (off-band stiffness); the bordered "
-                             "banded Newton of the continuation does not handle contact yet")
+        coo = getattr(sys_, "contact_coo", None)
         V = gauge_modes(sys_, state)
         ab = sys_.ab.copy(order="F")
         if V.shape[1]:
@@ -401,18 +420,52 @@ class _Problem:
             diag[diag == 0] = 1.0
             add_diagonal(ab, sys_.kl, sys_.ku, sys_.perm, diag, GAUGE_REGULARISATION)
         constrain_system(sys_, ab, 1.0)        # T^T K T on the end supports' free variables, held DOFs identity
+        if coo:
+            return self._sparse_factor(sys_, ab, coo, V)
         lu, piv, info = dgbtrf(ab, sys_.kl, sys_.ku, overwrite_ab=1)
         return (lu, piv, sys_, V) if info == 0 else None
+
+    def _sparse_factor(self, sys_, ab, coo, V):
+        """Active contact couples distant DOFs: the constrained band plus the contact Hessian's triplets (off the
+        held DOFs) as one sparse matrix, factorised by SuperLU (as the implicit solver does while pairs are
+        active). Returns ("sparse", lu, system, gauge basis) or None if it is singular."""
+        import scipy.sparse as sp
+        from scipy.sparse.linalg import splu
+
+        from .linalg import band_to_coo
+
+        if sys_.links.tri_dep.size:
+            raise ValueError("der.continuation: contact is active on a rod whose end supports link DOFs (a sliding "
+                             "clamp or a pin): the continuation's sparse path does not condense those; use "
+                             "method='natural' (each point a der.solve)")
+        n = ab.shape[1]
+        rb, cb, vb = band_to_coo(ab, sys_.kl, sys_.ku, sys_.perm)
+        rows, cols, vals = [rb], [cb], [vb]
+        for r, c, v in coo:
+            keep = ~(sys_.fixed[r] | sys_.fixed[c])
+            rows.append(r[keep])
+            cols.append(c[keep])
+            vals.append(v[keep])
+        A = sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+        try:
+            lu = splu(A, permc_spec="COLAMD")
+        except RuntimeError:           # exactly singular
+            return None
+        self.sparse_factorisations += 1
+        return ("sparse", lu, sys_, V)
 
     def solve(self, fac, rhs):
         """K^-1 rhs (rhs (n,) or (n, k)), rigid motions projected out."""
         from scipy.linalg.lapack import dgbtrs
 
         lu, piv, sys_, V = fac
-        b = np.empty_like(rhs)
-        b[sys_.perm] = rhs
-        x, info = dgbtrs(lu, sys_.kl, sys_.ku, b.reshape(len(b), -1), piv)
-        x = x.reshape(b.shape)[sys_.perm]
+        if isinstance(lu, str):                    # the sparse factorisation (active contact)
+            x = piv.solve(np.ascontiguousarray(rhs))
+        else:
+            b = np.empty_like(rhs)
+            b[sys_.perm] = rhs
+            x, info = dgbtrs(lu, sys_.kl, sys_.ku, b.reshape(len(b), -1), piv)
+            x = x.reshape(b.shape)[sys_.perm]
         if x.ndim == 1:
             _expand(sys_, x)
         else:
@@ -421,8 +474,18 @@ class _Problem:
                 _expand(sys_, col)
                 x[:, k] = col
         if V.shape[1]:
-            x = x - V @ (V.T @ x)
+            x = x - V @ self.gauge_coordinates(V, x)
         return x
+
+    def gauge_coordinates(self, V, x):
+        """The rigid-motion coordinates c of ``x`` (n,) or (n, k), with V c its rigid part: fitted on the node
+        coordinates (angles weighted GAUGE_ANGLE_WEIGHT times less), so that a step that only turns cross-sections
+        -- a twist ramp, which an orthogonal projection would split into a tilt of the whole rod and a remainder --
+        keeps its nodes where they are. A rod whose cross-sections may all turn together (no natural curvature)
+        has that turn fitted on the angles."""
+        w = np.where(self.weights == 0, 0.0, np.where(np.arange(self.n) % 4 == 3, GAUGE_ANGLE_WEIGHT, 1.0))
+        VW = V.T * w
+        return np.linalg.solve(VW @ V, VW @ x)
 
     def tangent(self, p, state, t_prev):
         """The unit tangent at a converged point, oriented along ``t_prev``; None if K is singular."""
@@ -431,8 +494,9 @@ class _Problem:
             return None
         Rp, dqf = self.dR_dp(p, state)
         b = self.solve(fac, Rp)
-        fixed = fac[2].fixed
-        b[fixed] = dqf[fixed]
+        held, dep = held_dofs(fac[2])
+        b[held] = dqf[held]
+        b[dep] += dqf[dep]
         # (K b = R_p: t = (b, 1) tp with <t_prev, t> = 1 fixing length and orientation)
         t = np.append(b, 1.0)
         tp = 1.0 / self.inner(t_prev, t) if self.inner(t_prev, t) != 0 else 1.0
@@ -447,21 +511,29 @@ class _Problem:
 
         trial = state.copy()
         res_prev = math.inf
-        updates = 0
-        for it in range(max_newton + 1):
-            R, res, strain_ok = self.residual(p, state)
+        updates = newton = 0
+        last_g, just_updated = None, False
+        # Newton's method on the bordered system. An inextensible rod's multipliers are updated as der.solve does
+        # (augmented Lagrangian: near equilibrium, when the stretch is above its tolerance; the penalty grows
+        # where the update does not shrink it), and Newton goes on from there with its own count and its own
+        # convergence test (an update raises the residual)
+        for it in range(max_newton + 61):
+            R, res, strain_ok, constraint_res = self.residual(p, state)
             if not np.isfinite(res):
                 return None
-            if res <= self.tol:
-                if strain_ok:
-                    return state, p, res, it
+            if res <= self.tol and strain_ok:
+                return state, p, res, it
+            if not strain_ok and not just_updated and res <= max(self.tol, 0.1 * constraint_res):
                 if updates >= 30:
                     return None
-                multiplier_update(self.system(p), state)
+                last_g = multiplier_update(self.system(p), state, last_g if res < 1e-4 else None)
                 updates += 1
+                newton, res_prev, just_updated = 0, math.inf, True
                 continue
-            if it == max_newton or (it >= 3 and res > 0.5 * res_prev) or res > 1e3 * max(res_prev, 1e-3):
+            just_updated = False
+            if newton == max_newton or (newton >= 3 and res > 0.5 * res_prev) or res > 1e3 * max(res_prev, 1e-3):
                 return None
+            newton += 1
             res_prev = res
             fac = self.factor(p, state)
             if fac is None:
@@ -473,8 +545,10 @@ class _Problem:
                 Rp, dqf = self.dR_dp(p, state)
                 ab = self.solve(fac, np.stack([R, Rp], axis=1))
                 a, b = ab[:, 0], ab[:, 1]
-                a[sys_.fixed] = 0.0
-                b[sys_.fixed] = dqf[sys_.fixed]
+                held, dep = held_dofs(sys_)
+                a[held] = 0.0
+                b[held] = dqf[held]
+                b[dep] += dqf[dep]
                 x = np.append(state.q, p)
                 N = self.inner(t, x - x_pred)
                 denom = float(np.sum(self.weights * t[:-1] * b)) + self.w_p * t[-1]
@@ -484,13 +558,38 @@ class _Problem:
                 dq = a + dp * b
             if not np.all(np.isfinite(dq)):
                 return None
+            if not fixed_p:
+                # held DOFs go where scene_of(p_new)'s targets put them (prepared, below), not along the linear
+                # step: a clamp keeps its end edge's length, and a linear turn of it would stretch it for good
+                dq[held] = 0.0
             p_new = p + dp
+            trial.penalty = None if state.penalty is None else state.penalty.copy()
             if not transport(sys_, state, state.q + dq, trial):
                 return None
             state = self.prepared(p_new, trial)
             state.lam[:] = trial.lam
             p = p_new
         return None
+
+
+def held_dofs(system):
+    """(held, dependent): boolean masks of the DOFs the constraints hold outright, and of those an end support
+    moves with its free variables (q_dep = c(p) + T y; system.fixed has both). A step's dependent entries are
+    T times its free ones (Problem.solve expands them) plus, along the parameter, dc/dp."""
+    dep = np.zeros(system.rod.n_dof, dtype=bool)
+    lk = getattr(system, "links", None)
+    if lk is not None and lk.tri_dep.size:
+        dep[lk.tri_dep] = True
+    return system.fixed & ~dep, dep
+
+
+def carry_penalty(system, state):
+    """Set ``system``'s stretch penalty to the one ``state`` was last updated with (state.penalty; the start
+    value if none): the continuation builds one system per parameter value, and a penalty grown by the multiplier
+    updates (der.solvers.system.multiplier_update) must not fall back to its start value at the next p."""
+    if system.rod.inextensible:
+        # the energy must use the penalty the multipliers were updated with, or the update over- or undershoots
+        system.plan.k_stretch[:] = system.k_initial if state.penalty is None else state.penalty
 
 
 def _expand(system, x):
@@ -593,7 +692,9 @@ def _point(problem, settings, state, p, s, dp_ds, residual, iterations):
     row["residual"] = float(residual)
     row["newton_iterations"] = int(iterations)
     if settings["stability"]:
+        t0 = time.perf_counter()
         st = check_stability(scene, state, settings["n_eigenvalues"])
+        row["stability_time"] = time.perf_counter() - t0
         row["min_eigenvalue"] = float(st.min_eigenvalue)
         row["stable"] = bool(st.stable)
         row["flutter"] = bool(st.flutter)
@@ -699,6 +800,7 @@ def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_re
         branch.states = []
     branch.status, branch.message = status, message
     branch.wall_time = time.perf_counter() - t_start
+    branch.sparse_factorisations = problem.sparse_factorisations
     return branch
 
 
@@ -719,7 +821,7 @@ def _step(problem, settings, state, p, t, x_pred, natural, landing, branch):
     p_new = float(x_pred[-1])
     if natural:
         pred = state.copy()
-        if not transport(problem.system(p), state, x_pred[:-1], pred):
+        if not transport(problem.system(p), state, _free_part(problem, p, state, x_pred[:-1]), pred):
             return None
         result = solve(problem.scene(p_new), state=pred, options=settings["options"], tol=settings["tol"],
                        stability=False, raise_on_failure=False)
@@ -727,7 +829,7 @@ def _step(problem, settings, state, p, t, x_pred, natural, landing, branch):
             return None
         return problem.prepared(p_new, result.state), p_new, result.residual, result.iterations
     pred = state.copy()
-    if not transport(problem.system(p), state, x_pred[:-1], pred):
+    if not transport(problem.system(p), state, _free_part(problem, p, state, x_pred[:-1]), pred):
         return None
     pred = problem.prepared(p_new, pred)
     pred.lam[:] = state.lam
@@ -809,10 +911,19 @@ def _predicted(problem, state, p, t, sigma):
     from .solvers.system import transport
 
     pred = state.copy()
-    transport(problem.system(p), state, state.q + sigma * t[:-1], pred)
+    transport(problem.system(p), state, _free_part(problem, p, state, state.q + sigma * t[:-1]), pred)
     pred = problem.prepared(p + sigma * t[-1], pred)
     pred.lam[:] = state.lam
     return pred
+
+
+def _free_part(problem, p, state, q):
+    """``q`` with the held DOFs put back to ``state``'s (scene_of's targets move them when the predicted state is
+    prepared: see Problem.correct)."""
+    held, _ = held_dofs(problem.system(p))
+    q = q.copy()
+    q[held] = state.q[held]
+    return q
 
 
 def _jsonable(value):

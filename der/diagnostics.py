@@ -38,10 +38,11 @@ import numpy as np
 from numba import njit
 
 from .energies.bend import _bend_local, material_curvatures
+from .energies.stiffness import bending_at, twisting_at
 from .energies.stretch import _stretch_local, elongations
 from .energies.twist import _twist_local, material_twist
 from .geometry import (
-    curvature_binormals, edge_frames, frenet_directors, material_frames, signed_angle, tangents,
+    curvature_binormals, edge_array, edge_frames, frenet_directors, material_frames, signed_angle, tangents,
 )
 from .rod import Rod, RodState, check_state
 
@@ -355,7 +356,8 @@ def _vertex_frames(rod, state):
 
 def internal_moments(rod, state):
     """Internal moment vectors at the vertices (force * length), global frame: the discrete constitutive
-    law A1 (kappa - kappa_bar) + A2 (twist - twist_bar) t (paper Eq. 28 in the continuum limit).
+    law A1 (kappa - kappa_bar) + A2 (twist - twist_bar) t (paper Eq. 28 in the continuum limit); with anisotropic
+    bending, A1 (kappa1 - kappa1_bar) m2 - A1' (kappa2 - kappa2_bar) m1 for the bending part.
 
     Parameters
     ----------
@@ -391,10 +393,19 @@ def internal_moments(rod, state):
     # each edge side's moment A1 [(k1 - k1_bar) m2 - (k2 - k2_bar) m1] / D in its own frame, averaged (the two
     # sides share the cell); its small component along the vertex tangent is dropped: the bending moment is
     # transverse, the twisting moment is the one along t
-    Mb = 0.5 * ((r[:, 0, :1] * m2[e] - r[:, 0, 1:] * m1[e]) + (r[:, 1, :1] * m2f - r[:, 1, 1:] * m1f))
-    Mb -= np.einsum("ij,ij->i", Mb, tv)[:, None] * tv
     D = rod.voronoi[:, None]
-    return rod.A1 * Mb / D + rod.A2 * (m - rod.twist_bar)[:, None] / D * tv
+    A2 = rod.A2 if np.ndim(rod.A2) == 0 else np.asarray(rod.A2)[:, None]
+    if rod.isotropic:
+        A1 = rod.A1 if np.ndim(rod.A1) == 0 else np.asarray(rod.A1)[:, None]
+        Mb = 0.5 * ((r[:, 0, :1] * m2[e] - r[:, 0, 1:] * m1[e]) + (r[:, 1, :1] * m2f - r[:, 1, 1:] * m1f))
+        Mb -= np.einsum("ij,ij->i", Mb, tv)[:, None] * tv
+        return A1 * Mb / D + A2 * (m - rod.twist_bar)[:, None] / D * tv
+    B = rod.bending_stiffness()       # (A1, A1') per vertex: kappa1 pairs with m2, kappa2 with m1
+    b1, b2 = B[:, :1], B[:, 1:]
+    Mb = 0.5 * ((b1 * r[:, 0, :1] * m2[e] - b2 * r[:, 0, 1:] * m1[e])
+                + (b1 * r[:, 1, :1] * m2f - b2 * r[:, 1, 1:] * m1f))
+    Mb -= np.einsum("ij,ij->i", Mb, tv)[:, None] * tv
+    return Mb / D + A2 * (m - rod.twist_bar)[:, None] / D * tv
 
 
 def vertex_frenet(rod, state, min_curvature=1e-8):
@@ -440,10 +451,11 @@ def _edge_forces(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_e
     g8 = np.empty(8)
     H8 = np.empty((8, 8))
     work = np.empty((5, 8))
-    ed = edge_frames(q, edge_nodes, d1)
+    E = edge_array(q, edge_nodes)
+    ed = edge_frames(q, edge_nodes, d1, E)
     if has_stretch:
         for j in range(n):
-            _stretch_local(q, edge_nodes, j, l_bar[j], k_stretch[j], lam[j], 1, g6, H6)
+            _stretch_local(E, j, l_bar[j], k_stretch[j], lam[j], 1, g6, H6)
             for i in range(3):
                 F[j, i] += g6[3 + i]   # dE/de = dE/dx_b
     for v in range(vertex_nodes.shape[0]):
@@ -451,8 +463,9 @@ def _edge_forces(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_e
         b = vertex_edges[v, 1]
         m2 = 0.0
         if has_bend:
-            s = A1 / voronoi[v]
-            e = _bend_local(ed, vertex_edges, weld, v, kappa_bar, s, s, 1, g8, H8, work)
+            a1, a2 = bending_at(A1, v)
+            s = max(a1, a2) / voronoi[v]
+            e = _bend_local(ed, vertex_edges, weld, v, kappa_bar, a1 / voronoi[v], a2 / voronoi[v], 1, g8, H8, work)
             for i in range(3):
                 F[a, i] += g8[i]
                 F[b, i] += g8[3 + i]
@@ -460,7 +473,7 @@ def _edge_forces(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_e
             # two edge sides agree)
             m2 += 2.0 * e * s
         if has_twist:
-            s = A2 / voronoi[v]
+            s = twisting_at(A2, v) / voronoi[v]
             e = _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v], s, 1, g8, H8, work)
             for i in range(3):
                 F[a, i] += g8[i]
@@ -543,7 +556,8 @@ def internal_forces(rod, state, k_stretch=None, energies=("stretch", "bend", "tw
     kappa_bar = rod.natural_curvature_edges().reshape(-1, 4)
     return _edge_forces(state.q, state.d1, state.reference_twist, lam, rod.edge_nodes, rod.vertex_nodes,
                         rod.vertex_edges, rod.l_bar, np.asarray(k_stretch, float), kappa_bar, rod.twist_bar,
-                        rod.weld, rod.voronoi, rod.A1, rod.A2, "stretch" in energies, "bend" in energies,
+                        rod.weld, rod.voronoi, rod.kernel_bending(), rod.kernel_twisting(), "stretch" in energies,
+                        "bend" in energies,
                         "twist" in energies)[0]
 
 

@@ -88,6 +88,45 @@ def edge_vector(q, edge_nodes, j):
 
 
 @njit(cache=True)
+def edge_array(q, edge_nodes, q_lo=None):
+    """Edge vectors ``e_j = x_b - x_a`` of all edges, shape (n_edges, 3): the one place where the solvers form
+    edges from positions (every kernel that needs edges takes this array).
+
+    Positions are ``x = q + q_lo`` with the optional ``q_lo`` (n_dof,) the low parts of a compensated pair
+    (``RodState.q_lo``, |q_lo| <= ulp(q) / 2): ``e = (q_b - q_a) + (lo_b - lo_a)``. The difference of the high
+    parts of neighbouring nodes is exact or rounded relative to the edge itself, so an edge carries the rounding
+    of its own length (eps |e|) rather than that of the coordinates (eps |x|, issue 17): a rod far from the origin,
+    or long against its edges, keeps the relative accuracy of its deformation."""
+    n = edge_nodes.shape[0]
+    out = np.empty((n, 3))
+    for j in range(n):
+        a = 4 * edge_nodes[j, 0]
+        b = 4 * edge_nodes[j, 1]
+        for k in range(3):
+            if q_lo is None:
+                out[j, k] = q[b + k] - q[a + k]
+            else:
+                out[j, k] = (q[b + k] - q[a + k]) + (q_lo[b + k] - q_lo[a + k])
+    return out
+
+
+@njit(cache=True)
+def add_compensated(q, q_lo, a, delta, out, out_lo):
+    """``(out, out_lo) <- (q, q_lo) + a delta`` as compensated pairs (TwoSum, then renormalised so that
+    |out_lo| <= ulp(out) / 2): the step is added to the position without losing the part of it below the
+    rounding of the coordinate. ``out`` may be ``q`` (and ``out_lo`` ``q_lo``)."""
+    for i in range(q.shape[0]):
+        s = a * delta[i]
+        hi = q[i] + s
+        bb = hi - q[i]
+        err = (q[i] - (hi - bb)) + (s - bb)
+        lo = q_lo[i] + err
+        h2 = hi + lo
+        out_lo[i] = lo - (h2 - hi)
+        out[i] = h2
+
+
+@njit(cache=True)
 def tangents(q, edge_nodes):
     """Unit tangents of all edges, shape (n_edges, 3)."""
     n = edge_nodes.shape[0]
@@ -148,17 +187,23 @@ def material_frames(q, t, d1):
 
 
 @njit(cache=True)
-def edge_frames(q, edge_nodes, d1):
+def edge_frames(q, edge_nodes, d1, E=None):
     """Per-edge data shared by the bending and twisting kernels, shape (n_edges, 10):
-    ``[t (3), |e|, m1 (3), m2 (3)]`` -- one pass, one sine and cosine per edge."""
+    ``[t (3), |e|, m1 (3), m2 (3)]`` -- one pass, one sine and cosine per edge. The edges are ``E``
+    (``edge_array``) when given, else formed from ``q``; the angles theta always come from ``q``."""
     n = edge_nodes.shape[0]
     out = np.empty((n, 10))
     for j in range(n):
-        a = 4 * edge_nodes[j, 0]
-        b = 4 * edge_nodes[j, 1]
-        e0 = q[b] - q[a]
-        e1 = q[b + 1] - q[a + 1]
-        e2 = q[b + 2] - q[a + 2]
+        if E is None:
+            a = 4 * edge_nodes[j, 0]
+            b = 4 * edge_nodes[j, 1]
+            e0 = q[b] - q[a]
+            e1 = q[b + 1] - q[a + 1]
+            e2 = q[b + 2] - q[a + 2]
+        else:
+            e0 = E[j, 0]
+            e1 = E[j, 1]
+            e2 = E[j, 2]
         le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
         t0, t1, t2 = e0 / le, e1 / le, e2 / le
         p0, p1, p2 = d1[j, 0], d1[j, 1], d1[j, 2]
@@ -201,8 +246,9 @@ def reference_twists(t, d1, vertex_edges):
 
 
 @njit(cache=True)
-def transport_frames(q, edge_nodes, vertex_edges, t_old, d1_old, twist_old, t_new, d1_new, twist_new):
-    """Move the reference frames from the tangents ``t_old`` to the tangents of ``q`` (parallel transport in time).
+def transport_frames(q, edge_nodes, vertex_edges, t_old, d1_old, twist_old, t_new, d1_new, twist_new, E=None):
+    """Move the reference frames from the tangents ``t_old`` to the tangents of ``q`` (parallel transport in time);
+    the edges are ``E`` (``edge_array``) when given, else formed from ``q``.
 
     Writes the new tangents, reference directors and reference twist (kept continuous with ``twist_old``:
     the change is taken in (-pi, pi], so that 2 pi windings and ring holonomy are never lost).
@@ -210,9 +256,12 @@ def transport_frames(q, edge_nodes, vertex_edges, t_old, d1_old, twist_old, t_ne
     """
     n = edge_nodes.shape[0]
     for j in range(n):
-        a = 4 * edge_nodes[j, 0]
-        b = 4 * edge_nodes[j, 1]
-        e = (q[b] - q[a], q[b + 1] - q[a + 1], q[b + 2] - q[a + 2])
+        if E is None:
+            a = 4 * edge_nodes[j, 0]
+            b = 4 * edge_nodes[j, 1]
+            e = (q[b] - q[a], q[b + 1] - q[a + 1], q[b + 2] - q[a + 2])
+        else:
+            e = (E[j, 0], E[j, 1], E[j, 2])
         le = vnorm(e)
         if not (le > 0.0) or not np.isfinite(le):
             return False
@@ -281,7 +330,7 @@ def frenet_directors(t, kb, vertex_edges, n_edges, min_kb):
 
 
 @njit(cache=True)
-def add_transport_jacobian(q, edge_nodes, dE_dtheta, ab, kl, ku, perm):
+def add_transport_jacobian(q, edge_nodes, dE_dtheta, ab, kl, ku, perm, E=None):
     """Add the frame-transport part of the force Jacobian (non-symmetric) to the band matrix ``ab``.
 
     The reference frames move by parallel transport *in time*, so the angles theta are coordinates of a chart
@@ -297,11 +346,16 @@ def add_transport_jacobian(q, edge_nodes, dE_dtheta, ab, kl, ku, perm):
         g = dE_dtheta[j]
         if g == 0.0:
             continue
-        a = 4 * edge_nodes[j, 0]
-        b = 4 * edge_nodes[j, 1]
-        e0 = q[b] - q[a]
-        e1 = q[b + 1] - q[a + 1]
-        e2 = q[b + 2] - q[a + 2]
+        if E is None:
+            a = 4 * edge_nodes[j, 0]
+            b = 4 * edge_nodes[j, 1]
+            e0 = q[b] - q[a]
+            e1 = q[b + 1] - q[a + 1]
+            e2 = q[b + 2] - q[a + 2]
+        else:
+            e0 = E[j, 0]
+            e1 = E[j, 1]
+            e2 = E[j, 2]
         le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
         c = 0.5 * g / (le * le * le)   # [t]_x / |e|^2 = [e]_x / |e|^3
         # the 3x3 block c [e]_x, repeated with signs (+, -, -, +) on (a, a), (a, b), (b, a), (b, b)

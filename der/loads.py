@@ -352,9 +352,10 @@ def add_theta_moments(per_edge, fext):
 
 
 @njit(cache=True)
-def add_dead_torques(q, edge_nodes, edges, torques, order, fext, ab, kl, ku, perm):
+def add_dead_torques(q, edge_nodes, edges, torques, order, fext, ab, kl, ku, perm, E=None):
     """Dead torque vectors ``torques[i]`` on the material frames of ``edges[i]``; with order >= 2 also their
-    load stiffness ``-d fext / d q`` into the band matrix."""
+    load stiffness ``-d fext / d q`` into the band matrix. ``E``: edge vectors (``geometry.edge_array``; formed
+    from ``q`` if None)."""
     dofs = np.empty(6, dtype=np.int64)
     K = np.zeros((7, 7))
     for i in range(edges.shape[0]):
@@ -363,7 +364,7 @@ def add_dead_torques(q, edge_nodes, edges, torques, order, fext, ab, kl, ku, per
         b = 4 * edge_nodes[j, 1]
         e = np.empty(3)
         for k in range(3):
-            e[k] = q[b + k] - q[a + k]
+            e[k] = q[b + k] - q[a + k] if E is None else E[j, k]
         le = np.sqrt(e[0] ** 2 + e[1] ** 2 + e[2] ** 2)
         t = e / le
         tau = torques[i]

@@ -16,7 +16,7 @@ from .energies.bend import bend_energy, bend_gradient, bend_hessian
 from .energies.stretch import stretch_energy, stretch_gradient, stretch_hessian
 from .energies.twist import twist_energy, twist_gradient, twist_hessian
 from .energies.vertex import bend_twist_hessian, stretch_bend_twist_hessian
-from .geometry import add_transport_jacobian, edge_frames
+from .geometry import add_transport_jacobian, edge_array, edge_frames
 from .linalg import zero_band
 from .loads import (
     DistributedForce, EndForce, EndTorque, FollowerForce, PointForce, PointTorque, TwistingMoment, add_dead_torques,
@@ -258,7 +258,7 @@ def make_plan(scene, k_stretch):
         "stretch" in scene.energies, "bend" in scene.energies, "twist" in scene.energies,
         rod.edge_nodes, rod.vertex_nodes, rod.vertex_edges,
         rod.l_bar, rod.voronoi, rod.natural_curvature_edges().reshape(-1, 4), rod.twist_bar, rod.weld,
-        rod.A1, rod.A2,
+        rod.kernel_bending(), rod.kernel_twisting(),   # floats for a uniform isotropic rod (energies.stiffness)
         np.array(k_stretch, dtype=float),        # a copy: the solver may raise the penalty in place
         has_nodal, nodal, has_theta, theta,
         len(t_edges) > 0, np.array(t_edges, dtype=np.int64), np.array(t_vecs, dtype=float).reshape(-1, 3),
@@ -269,12 +269,15 @@ def make_plan(scene, k_stretch):
 
 
 @njit(cache=True)
-def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, perm):
+def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, perm, q_lo=None):
     """Energy of the scene at ``q``; ``grad`` <- dE/dq, ``fext`` <- generalized external force.
 
     With ``order >= 2`` also ``ab`` <- the force Jacobian ``K = d(grad - fext)/dq`` in band storage: the energy
     Hessian, the frame-transport term and the load stiffness. ``grad``, ``fext`` and ``ab`` are overwritten.
+    ``q_lo``: the low parts of compensated positions (``RodState.q_lo``) or None; the edges every term uses are
+    formed once, here (``geometry.edge_array``), with the relative accuracy of the edges themselves.
     """
+    E = edge_array(q, plan.edge_nodes, q_lo)
     grad[:] = 0.0
     fext[:] = 0.0
     if order >= 2:
@@ -285,13 +288,14 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
     if plan.has_stretch and not full:
         plan.counters[0] += 1
         if order >= 2:
-            energy += stretch_hessian(q, plan.edge_nodes, plan.l_bar, plan.k_stretch, lam, grad, ab, kl, ku, perm)
+            energy += stretch_hessian(q, plan.edge_nodes, plan.l_bar, plan.k_stretch, lam, grad, ab, kl, ku, perm,
+                                      E)
         elif order == 1:
-            energy += stretch_gradient(q, plan.edge_nodes, plan.l_bar, plan.k_stretch, lam, grad)
+            energy += stretch_gradient(q, plan.edge_nodes, plan.l_bar, plan.k_stretch, lam, grad, E)
         else:
-            energy += stretch_energy(q, plan.edge_nodes, plan.l_bar, plan.k_stretch, lam)
+            energy += stretch_energy(q, plan.edge_nodes, plan.l_bar, plan.k_stretch, lam, E)
     if plan.has_bend or (plan.has_twist and order >= 1):
-        ed = edge_frames(q, plan.edge_nodes, d1)   # one pass over edges, shared by bending and twisting
+        ed = edge_frames(q, plan.edge_nodes, d1, E)   # one pass over edges, shared by bending and twisting
     else:
         ed = np.empty((0, 10))
     if full:
@@ -301,7 +305,7 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
         e_stretch, e_bend, e_twist = stretch_bend_twist_hessian(
             q, ed, plan.edge_nodes, plan.vertex_nodes, plan.vertex_edges, plan.l_bar, plan.k_stretch, lam,
             reference_twist, plan.weld, plan.kappa_bar, plan.twist_bar, plan.voronoi, plan.A1, plan.A2, grad, ab, kl,
-            ku, perm)
+            ku, perm, E)
         energy += e_stretch
         energy += e_bend
         energy += e_twist
@@ -342,7 +346,7 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
         dE_dtheta = np.empty(n_edges)
         for j in range(n_edges):
             dE_dtheta[j] = grad[4 * j + 3]
-        add_transport_jacobian(q, plan.edge_nodes, dE_dtheta, ab, kl, ku, perm)
+        add_transport_jacobian(q, plan.edge_nodes, dE_dtheta, ab, kl, ku, perm, E)
     if plan.has_nodal:
         plan.counters[4] += 1
         add_nodal_forces(plan.nodal_forces, fext)
@@ -351,13 +355,14 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
         add_theta_moments(plan.theta_moments, fext)
     if plan.has_dead_torques:
         plan.counters[6] += 1
-        add_dead_torques(q, plan.edge_nodes, plan.torque_edges, plan.torque_vectors, order, fext, ab, kl, ku, perm)
+        add_dead_torques(q, plan.edge_nodes, plan.torque_edges, plan.torque_vectors, order, fext, ab, kl, ku, perm,
+                         E)
     if plan.has_follower:
         plan.counters[7] += 1
-        add_follower_forces(edge_frames(q, plan.edge_nodes, d1), plan.edge_nodes, q, plan.follower_density,
+        add_follower_forces(edge_frames(q, plan.edge_nodes, d1, E), plan.edge_nodes, q, plan.follower_density,
                             plan.follower_first, plan.follower_second, order, fext, ab, kl, ku, perm)
     if plan.has_follower_torques:
         plan.counters[8] += 1
-        add_follower_torques(edge_frames(q, plan.edge_nodes, d1), plan.edge_nodes, plan.follower_torque_edges,
+        add_follower_torques(edge_frames(q, plan.edge_nodes, d1, E), plan.edge_nodes, plan.follower_torque_edges,
                              plan.follower_torque_vectors, order, fext, ab, kl, ku, perm)
     return energy

@@ -26,13 +26,15 @@ class SweepResult:
     rows : list of dicts: the point's parameters, then what the function returned (a dict; a Branch is given
         as its ``to_dict()``; any other value as ``value``), then ``ok`` and ``error`` (the exception, as
         "Type: message", when the point failed; None otherwise).
-    task_seconds : the seconds each point took where it ran (not part of the rows: the rows are the same on
-        every run). wall_time : seconds for the whole sweep (without starting a local cluster);
+    task_seconds : the seconds each point took where it ran, and task_cpu_seconds the CPU seconds of the
+        process that ran it over the same time (not part of the rows: the rows are the same on every run; on a
+        loaded machine CPU < wall says how much of a core the point got). wall_time : seconds for the whole sweep (without starting a local cluster);
         startup_time : seconds to start (or connect to) the cluster. workers : how many ran it (0: serial).
     """
 
-    def __init__(self, rows, task_seconds, wall_time, startup_time, workers, scheduler):
+    def __init__(self, rows, task_seconds, wall_time, startup_time, workers, scheduler, task_cpu_seconds=None):
         self.rows, self.task_seconds = rows, task_seconds
+        self.task_cpu_seconds = list(task_cpu_seconds) if task_cpu_seconds is not None else [None] * len(rows)
         self.wall_time, self.startup_time, self.workers, self.scheduler = wall_time, startup_time, workers, scheduler
 
     def __len__(self):
@@ -124,8 +126,9 @@ def grid_points(grid):
 
 
 def run_point(function, point):
-    """Run one point: (row, seconds). An exception becomes a row with ok False and its reason, never a raise."""
-    t0 = time.perf_counter()
+    """Run one point: (row, seconds, CPU seconds of this process). An exception becomes a row with ok False and
+    its reason, never a raise."""
+    t0, c0 = time.perf_counter(), time.process_time()
     row = dict(point)
     try:
         out = function(**point)
@@ -140,7 +143,7 @@ def run_point(function, point):
         row["ok"], row["error"] = True, None
     except Exception as exc:       # a failed point reports its reason and does not stop the sweep
         row["ok"], row["error"] = False, f"{type(exc).__name__}: {exc}"
-    return row, time.perf_counter() - t0
+    return row, time.perf_counter() - t0, time.process_time() - c0
 
 
 def sweep(function, grid, *, scheduler=None, workers=2, progress=True, client=None):
@@ -187,14 +190,15 @@ def sweep(function, grid, *, scheduler=None, workers=2, progress=True, client=No
     bar = _Progress(len(points), progress)
     if client is None and scheduler is None and workers == 0:
         t0 = time.perf_counter()
-        rows, secs = [], []
+        rows, secs, cpus = [], [], []
         for p in points:
-            row, s = run_point(function, p)
+            row, s, c = run_point(function, p)
             rows.append(row)
             secs.append(s)
+            cpus.append(c)
             bar.update()
         bar.close()
-        return SweepResult(rows, secs, time.perf_counter() - t0, 0.0, 0, None)
+        return SweepResult(rows, secs, time.perf_counter() - t0, 0.0, 0, None, cpus)
     try:
         from dask.distributed import Client, LocalCluster, as_completed
     except ImportError:
@@ -228,8 +232,8 @@ def sweep(function, grid, *, scheduler=None, workers=2, progress=True, client=No
             client.close()
             if cluster is not None:
                 cluster.close()
-    return SweepResult([r for r, _ in out], [s for _, s in out], wall, startup, n_workers,
-                       scheduler or ("local" if cluster is not None else "client"))
+    return SweepResult([r for r, _, _ in out], [s for _, s, _ in out], wall, startup, n_workers,
+                       scheduler or ("local" if cluster is not None else "client"), [c for _, _, c in out])
 
 
 class _Progress:

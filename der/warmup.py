@@ -38,6 +38,7 @@ def _dispatchers():
 # calls inlined into it (numba's cache index tracks only a kernel's own source file, so an inlined callee's
 # stale index means nothing: it is never loaded on its own)
 ENTRY_KERNELS = (("der.scene", "evaluate"), ("der.geometry", "transport_frames"), ("der.geometry", "edge_frames"),
+                 ("der.geometry", "edge_array"), ("der.geometry", "add_compensated"),
                  ("der.diagnostics", "_edge_forces"), ("der.solvers.explicit", "_fire_run"))
 
 
@@ -121,6 +122,16 @@ def _run_kernels():
     for solver in ("implicit", "explicit"):
         solve(supported, solver=solver, tol=1e-6, raise_on_failure=False, stability=True, max_steps=2000,
               progress=False)
+    # a rod varying along its length (issue 13): per-vertex (A1, A1') and A2 arrays are the kernels' other types
+    from .rod import rod as make_rod
+
+    varying = make_rod(rest=shapes.strains(1.0, 6, kappa1=1.0, kappa2=0.5, omega=0.3), start="straight",
+                       A1=[1.0, 1.1, 1.2, 1.3, 1.4], A1prime=2.0, A2=1.5, EA=1e4)
+    vscene = Scene(varying, loads=[end_force([1e-3, 0, 0])], constraints=[clamp("start")])
+    for solver in ("implicit", "explicit"):
+        res = solve(vscene, solver=solver, tol=1e-6, raise_on_failure=False, stability=True, max_steps=2000,
+                    progress=False)
+    dg.profile(varying, res.state)
     ring = rod_from_shape(shapes.ring(1.0, 5), 1.0, 1.5, EA=100.0)
     res = solve(Scene(ring, loads=[twisting_moment(1e-3)]), tol=1e-6, raise_on_failure=False, progress=False)
     dg.profile(ring, res.state)

@@ -25,7 +25,7 @@ import der
 from der import closed_forms as cf
 from der import diagnostics as dg
 from der.cli import Range, scenario_main, validator
-from der.geometry import reference_twists, tangents
+from der.geometry import material_frames, reference_twists, tangents
 from der.rod import RodState, frenet_frame_of_shape
 
 PARAMETERS = [
@@ -90,6 +90,43 @@ def solve_at(p, solver, rod, eta, phi):
     return result, measure(rod, result.state, p.lam)
 
 
+def end_clamps(rod, eta, phi, lam):
+    """Both ends clamped where the discrete uniform helix at (eta, phi) has them: each end cross-section's centre
+    and material frame (der.clamp's rotation is relative to the rest helix)."""
+    rest, deformed = rod.rest_state(), deformed_state(rod, eta, phi, lam)
+    clamps = []
+    for end, j in (("start", 0), ("end", rod.n_edges - 1)):
+        frames = []
+        for st in (rest, deformed):
+            m1, m2 = material_frames(st.q, st.tangents, st.d1)
+            frames.append(np.stack([m1[j], m2[j], st.tangents[j]], axis=1))
+        a, b = rod.edge_nodes[j]
+        centre = 0.5 * (deformed.positions[a] + deformed.positions[b])
+        clamps.append(der.clamp(end, rotation=frames[1] @ frames[0].T, position=centre))
+    return clamps
+
+
+def displacement_path(p, solver, rod, etas, phi):
+    """The equilibria at the elongations ``etas`` (increasing), winding phi held: one der.continuation in eta
+    (pseudo-arclength, warm-started, the clamps moving with eta) from each eta to the next; the first from the
+    deformed uniform helix. Each landing point is handed to the scenario's solver (it converges at once, and the
+    run's verdict and recording see it). Returns [(eta, measure(...), SolveResult)]."""
+    def scene_of(eta):
+        return der.Scene(rod, constraints=end_clamps(rod, eta, phi, p.lam))
+
+    out = [(etas[0], solver.solve(scene_of(etas[0]), state=deformed_state(rod, etas[0], phi, p.lam)))]
+    for a, b in zip(etas[:-1], etas[1:]):
+        if not out[-1][1].converged:
+            break
+        branch = der.continuation(scene_of, a, b, state=out[-1][1].state, parameter="eta", ds=0.5, ds_max=1.0,
+                                  stability=False, locate=False, max_steps=50, progress=False)
+        if branch.points[-1]["eta"] != b:
+            raise RuntimeError(f"helix_winding: the continuation in eta stopped at {branch.points[-1]['eta']:.6g} "
+                               f"before {b:.6g}: {branch.message}")
+        out.append((b, solver.solve(scene_of(b), state=branch.states[-1])))
+    return [(e, measure(rod, res.state, p.lam), res) for e, res in out]
+
+
 def force_control(p, solver, rod, P0, phi):
     """Secant iteration on eta until the measured axial force equals P0 (the winding phi held)."""
     guess = cf.winding_eta(P0, phi, p.lam, p.A1)
@@ -135,8 +172,8 @@ def figure(p, solver, rod_for):
                            "P0_paper": cf.paper_winding_P0(eta, 0.0, lam, A)})
             q = _with(p, lam=lam, A1=A)
             rod = rod_for(q)
-            for e in np.linspace(0.6, 0.9 * em, 6):
-                _, m = solve_at(q, solver, rod, e, 0.0)
+            # the force-elongation curve followed by der.continuation in eta through the six points
+            for e, m, _ in displacement_path(q, solver, rod, list(np.linspace(0.6, 0.9 * em, 6)), 0.0):
                 ref = float(cf.winding_P0(e, 0.0, lam, A))
                 points.append({"lam": lam, "eta": e, "P0_simulated": m["P0"], "P0_corrected": ref,
                                "P0_paper": float(cf.paper_winding_P0(e, 0.0, lam, A)),

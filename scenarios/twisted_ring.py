@@ -10,8 +10,9 @@ its plane, and the stability of the equilibrium.
 
 Naturally straight ring: the planar ring with uniform twist is an equilibrium for every twist and stable up
 to Michell's threshold twist = 2 pi sqrt(3) A1 / A2 (Michell 1889, Zajac 1962). ``--sweep K`` continues from
-twist / K to twist in K steps, locates the sign change of the lowest stiffness eigenvalue and bisects it
-(``--locate``, default; ``--no-locate`` interpolates) to 1e-5. With ``--perturb EPS`` every step starts from the previous state bent out
+twist / K to twist in K steps, finds the step where the lowest stiffness eigenvalue changes sign and locates it
+with ``der.continuation`` (``--locate``, default: pseudo-arclength from the last stable step, the change of
+stability found by a secant on the lowest eigenvalue to 1e-9; ``--no-locate`` interpolates). With ``--perturb EPS`` every step starts from the previous state bent out
 of plane by EPS a0, so that past the threshold the ring writhes (Tw turns into Wr at constant Lk).
 
 Naturally curved ring: twisting the cross-section away from the ring's normal costs bending energy (the
@@ -45,11 +46,12 @@ PARAMETERS = [
      Range(0.0, 0.5, open_hi=True)),
     ("radius", None, float, "rod radius r for self-contact (issue 14): strands stay 2r apart and never pass through "
      "each other (default: no contact)", Range(0.0, lambda p: 0.5 * p.a0, open_lo=True, why="0 < r < a0/2")),
-    ("locate", True, bool, "bisect the stability threshold found by the sweep (--no-locate: interpolate it)"),
+    ("locate", True, bool, "locate the stability threshold found by the sweep with der.continuation "
+     "(--no-locate: interpolate it)"),
     ("png", None, str, "write a picture of the final ring (with --sweep: four states along it) to this PNG"),
 ]
 
-LOCATE_TOL = 1e-5
+LOCATE_TOL = 1e-9      # relative width of the final bracket of der.continuation's secant
 
 
 def make_rod(p):
@@ -212,7 +214,8 @@ def _picture(base, items, kappa0, p):
 
 
 def _threshold(p, solver, base, sweep, states):
-    """The first loss of stability along the sweep: interpolated, then (``--locate``) bisected."""
+    """The first loss of stability along the sweep: interpolated, then (``--locate``) located by
+    ``der.continuation`` from the last stable step (secant on the lowest eigenvalue, or on dp/ds at a fold)."""
     out = {"threshold_twist": None, "threshold_located_by": None}
     for k, s in enumerate(sweep):
         if s["stable"] is not False:
@@ -226,28 +229,31 @@ def _threshold(p, solver, base, sweep, states):
         out["threshold_twist"] = lo + (hi - lo) * a / (a - b)
         out["threshold_located_by"] = "linear interpolation of the lowest eigenvalue between two sweep steps"
         if p.locate:
-            out["threshold_twist"] = _bisect(p, solver, base, states[k - 1], lo, hi)
-            out["threshold_located_by"] = (f"bisection on the sign of the lowest eigenvalue along the branch "
-                                           f"(relative width {LOCATE_TOL:g})")
+            found = _locate(p, base, states[k - 1], lo, hi)
+            if found is not None:
+                out["threshold_twist"] = found["twist"]
+                out["threshold_kind"] = found["kind"]
+                out["threshold_located_to"] = found["located_to"]
+                out["threshold_located_by"] = (f"der.continuation from the last stable step: {found['located_by']} "
+                                               f"(to {LOCATE_TOL:g} relative)")
         return out
     return out
 
 
-def _bisect(p, solver, base, state, lo, hi):
-    """Bisection on the twist for the sign change of the lowest eigenvalue, continuing from the stable side."""
-    welded = lo
-    while hi - lo > LOCATE_TOL * abs(hi):
-        mid = 0.5 * (lo + hi)
-        rod = base.with_imposed_twist(mid)
-        result = solver.solve(der.Scene(rod, contacts=contacts(p)),
-                              state=start_state(rod, state, welded, mid, 0.0, p.a0))
-        if not result.converged:
-            raise RuntimeError(f"bisection solve failed at twist = {mid}: {result.message}")
-        if result.stable:
-            lo, state, welded = mid, result.state, mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
+def _locate(p, base, state, lo, hi):
+    """The first special point of the branch through ``state`` (twist ``lo``, stable) towards ``hi``, found by
+    der.continuation (pseudo-arclength in the twist, stability at every point); None if it finds none."""
+    def scene_of(twist):
+        return der.Scene(base.with_imposed_twist(twist), contacts=contacts(p))
+
+    try:
+        branch = der.continuation(scene_of, lo, hi, state=state, parameter="twist", ds=0.5, ds_max=0.5,
+                                  locate_tol=LOCATE_TOL, max_steps=50, stop=lambda r: not r["stable"],
+                                  progress=False, keep_states=False)
+    except ValueError as exc:        # e.g. contact active: the continuation refuses it (the interpolation stays)
+        print(f"twisted_ring.py: threshold not located by der.continuation: {exc}", file=sys.stderr)
+        return None
+    return branch.special[0] if branch.special else None
 
 
 def validate(p):

@@ -35,7 +35,7 @@ class Evaluator:
         rod = scene.rod
         self.rod = rod
         if k_stretch is None:
-            k_stretch = (rod.EA if rod.EA else 50.0) / rod.l_bar
+            k_stretch = (rod.EA if rod.EA is not None else 50.0) / rod.l_bar
         self.plan = make_plan(scene, k_stretch)
         self.kl, self.ku, self.perm = band_layout(rod.n_nodes, rod.closed)
 

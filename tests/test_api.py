@@ -20,6 +20,7 @@ import der.solvers.options
 from der import diagnostics
 
 warmup_module = sys.modules["der.warmup"]   # der.warmup is the function
+rod_module = sys.modules["der.rod"]         # der.rod is the constructor
 
 
 def _public_functions(module):
@@ -50,14 +51,15 @@ def test_every_public_name_has_a_docstring():
             if callable(target) and not (inspect.getdoc(target) or "").strip():
                 missing.append(f"{cls.__name__}.{attr}")
     for fn in (der.Rod.with_natural, der.Rod.displaced, der.Rod.with_stiffness, der.Rod.with_imposed_twist,
-               der.Rod.rest_state):
+               der.Rod.rest_state, der.Rod.start_state):
         if not _documented(fn):
             missing.append(fn.__qualname__)
     assert not missing, f"public names without a docstring of substance: {missing}"
 
 
-@pytest.mark.parametrize("module", [der, der.loads, der.constraints, der.shapes, der.rod, der.scene, diagnostics,
-                                    der.solvers, der.solvers.options], ids=lambda m: m.__name__)
+@pytest.mark.parametrize("module", [der, der.loads, der.constraints, der.shapes, der.sections, rod_module, der.scene,
+                                    diagnostics,
+                                    der.solvers, der.solvers.options, der.dynamics], ids=lambda m: m.__name__)
 def test_docstring_examples_run(module):
     result = doctest.testmod(module, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
     assert result.failed == 0

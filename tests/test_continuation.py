@@ -109,6 +109,104 @@ def test_two_wave_bifurcation_and_branch_switching():
     assert check.iterations <= 1 and np.abs(check.state.q - last.q).max() < 1e-6
 
 
+def michell_ring(n, A1=1.0, A2=1.5):
+    """The naturally straight ring (twisted_ring.py --kappa0 0) of n edges, as a function of the imposed twist."""
+    rod = der.rod_from_shape(der.shapes.ring(1.0, n), A1, A2)
+    rod = rod.with_natural(kappa_bar=rod.kappa_bar * 0.0)
+    return rod, lambda twist: der.Scene(rod.with_imposed_twist(twist))
+
+
+def writhe(scene, state):
+    return float(dg.linking_number(scene.rod, state)[2])
+
+
+def lk_error(scene, state):
+    return float(abs(dg.linking_number(scene.rod, state)[0] - scene.rod.imposed_twist / (2 * math.pi)))
+
+
+MICHELL_SUMMARIES = {"writhe": writhe, "lk_error": lk_error, "out_of_plane": out_of_plane}
+
+
+def michell_branch(n):
+    rod, scene_of = michell_ring(n)
+    welded = rod.with_imposed_twist(1.0)
+    start = welded.displaced(welded.rest_state(), None, np.arange(n) / n)     # the weld's twist spread uniformly
+    branch = der.continuation(scene_of, 1.0, 12.0, state=start, parameter="twist", ds=0.2, locate_tol=1e-9,
+                              summaries=MICHELL_SUMMARIES, stop=lambda r: not r["stable"])
+    assert branch.special, branch.message
+    return scene_of, branch
+
+
+def test_michell_threshold_located_and_the_writhing_branch_followed():
+    """The naturally straight twisted ring loses stability at Michell's 2 pi sqrt(3) A1/A2 (here A1/A2 = 2/3):
+    located by der.continuation's secant on the lowest eigenvalue, error O(1/n^2) (ratio ~4 from n = 20 to 40),
+    Richardson to 1e-3; independent solves bracket it; the branch switched onto writhes at constant Lk."""
+    ref = cf.michell_twist(1.0, 1.5)
+    assert abs(ref - 2 * math.pi * math.sqrt(3) / 1.5) < 1e-12
+    found = []
+    for n in (20, 40):
+        scene_of, branch = michell_branch(n)
+        sp = branch.special[0]
+        assert sp["kind"] == "bifurcation" and len(branch.special) == 1
+        assert sp["located_to"] < 1e-6 and abs(sp["min_eigenvalue"]) < 1e-6
+        # the planar branch: no writhe, Lk = twist / 2 pi, stable below the point and unstable after it
+        assert all(abs(p["writhe"]) < 1e-10 and p["lk_error"] < 1e-10 for p in branch.points)
+        assert all(p["stable"] == (p["twist"] < sp["twist"]) for p in branch.points)
+        assert all(p["stability_time"] >= 0 for p in branch.points)
+        found.append(sp["twist"])
+    e20, e40 = found[0] - ref, found[1] - ref
+    assert 0 < e40 < e20 and 3.5 < e20 / e40 < 4.5
+    assert abs((4 * found[1] - found[0]) / 3 - ref) / ref < 1e-3
+    # independent check (n = 40): der.solve just below the located twist is stable, just above unstable
+    state = sp["state"]
+    below = der.solve(scene_of(sp["twist"] * (1 - 1e-4)), state=state)
+    above = der.solve(scene_of(sp["twist"] * (1 + 1e-4)), state=state)
+    assert below.stable and not above.stable
+    # the writhing branch: out of the plane, writhe growing, Lk = Tw + Wr held at twist / 2 pi
+    switched = branch.switch(0, ds=0.05, max_steps=4)
+    assert len(switched.points) == 5, switched.message
+    wr = np.array([abs(p["writhe"]) for p in switched.points])
+    assert wr[0] < 1e-10 and np.all(np.diff(wr) > 1e-3) and wr[-1] > 0.05
+    assert min(p["out_of_plane"] for p in switched.points[1:]) > 1e-2
+    assert all(p["lk_error"] < 1e-9 for p in switched.points)
+    last = switched.states[-1]
+    check = der.solve(scene_of(switched.points[-1]["twist"]), state=last, stability=False)
+    assert check.iterations <= 1 and np.abs(check.state.q - last.q).max() < 1e-6
+
+
+def test_continuation_through_self_contact_uses_the_sparse_factorisation():
+    """Past Michell's threshold the naturally straight ring (n = 40, rod radius 0.05) writhes into self-contact;
+    from there der.continuation follows it in the imposed twist with contact pairs active: the bordered Newton
+    factorises band + contact Hessian sparsely, Lk = Tw + Wr stays twist / 2 pi, and every point is an
+    equilibrium by der.solve's measure with its strands at least 2r apart."""
+    n, r = 40, 0.05
+    rod, _ = michell_ring(n)
+    twist = 2.0 * cf.michell_twist(1.0, 1.5)
+
+    def scene_of(tw):
+        return der.Scene(rod.with_imposed_twist(tw), contacts=[der.self_contact(r)])
+
+    welded = rod.with_imposed_twist(twist)
+    x0 = welded.rest_q.reshape(-1, 4)[:, :3]
+    phi = np.arctan2(x0[:, 1], x0[:, 0])
+    kick = np.zeros_like(x0)
+    kick[:, 2] = 0.005 * (np.cos(2 * phi) + np.sin(3 * phi))
+    start = der.solve(scene_of(twist), state=welded.displaced(welded.rest_state(), kick, twist * np.arange(n) / n),
+                      stability=False)
+    assert start.contact["n_contacts"] > 0 and writhe(scene_of(twist), start.state) > 1.0
+    branch = der.continuation(scene_of, twist, twist + 1.0, state=start.state, parameter="twist", ds=0.2,
+                              max_steps=3, locate=False, summaries={"writhe": writhe, "lk_error": lk_error})
+    assert len(branch.points) == 4, branch.message
+    assert branch.sparse_factorisations > 0
+    tw = np.array([p["twist"] for p in branch.points])
+    assert np.all(np.diff(tw) > 0)
+    assert all(p["lk_error"] < 1e-9 and p["residual"] <= 1e-8 for p in branch.points)
+    for p, state in zip(branch.points[1:], branch.states[1:]):
+        check = der.solve(scene_of(p["twist"]), state=state, stability=False)
+        assert check.iterations <= 1 and np.abs(check.state.q - state.q).max() < 1e-6
+        assert check.contact["n_contacts"] > 0 and check.contact["min_distance"] >= 2 * r
+
+
 def test_natural_continuation_stops_at_the_fold():
     branch = der.continuation(loop(12, 1.0), 0.8, 1.2, method="natural", parameter="mt", ds=0.1, ds_min=1e-3,
                               stability=False)

@@ -110,6 +110,20 @@ def test_scenario_json_contract(tmp_path):
     assert ok, msg
 
 
+def test_perversion_scenario_json_contract_and_recording(tmp_path):
+    """Issue 13's new scenario: the JSON contract (error, converged, reactions) and a valid rerun recording."""
+    out = subprocess.run([sys.executable, str(ROOT / "scenarios" / "perversion.py"), "--json", "--n", "41", "--rrd",
+                          str(tmp_path / "p.rrd")], capture_output=True, text=True, timeout=600, env=ENV)
+    assert out.returncode == 0, out.stderr
+    record = json.loads(out.stdout.strip().splitlines()[-1])
+    assert record["converged"] is True and record["error"] < 5e-4
+    assert record["params"] == {"L": 2.0, "kappa0": 1.5, "A1": 1.0, "A2": 1.0, "P": 1.0, "EA": None}
+    assert [r["end"] for r in record["reactions"]] == ["start", "end"]
+    assert abs(sum(r["force"][0] for r in record["reactions"])) < 1e-8      # the transverse reactions balance
+    ok, msg = verify(tmp_path / "p.rrd")
+    assert ok, msg
+
+
 def test_scenario_invalid_input_exits_2_with_one_line():
     out = run_scenario("--n", "0")
     assert out.returncode == 2
@@ -180,6 +194,8 @@ INVALID = [
     (("ring_torsion.py", ["--symmetric", "2"]), "--symmetric is a flag"),
     (("loop_twist.py", ["--locate", "3"]), "--locate is a flag"),
     (("ring_torsion.py", ["--time-budget", "0"]), "--time-budget must be > 0"),
+    (("perversion.py", ["--kappa0", "100"]), "--kappa0 must be in (0, 3]"),
+    (("perversion.py", ["--P", "-1"]), "--P must be in [0, 5]"),
     (("reproduce_paper.py", ["--n", "0"]), "--n must be an integer from 2 to 1,000,000"),
     (("reproduce_paper.py", ["--n", "1"]), "--n must be an integer from 2 to 1,000,000"),
     (("reproduce_paper.py", ["--rrd", "/proc/der_test_dir"]), "--rrd: cannot write into /proc/der_test_dir"),

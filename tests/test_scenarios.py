@@ -57,6 +57,18 @@ def test_ring_torsion_end_motion(torque):
     assert np.linalg.norm(disp - ref_disp) < 3e-3 * np.linalg.norm(ref_disp)
 
 
+def test_perversion_matches_the_solve_bvp_reference_second_order():
+    """Issue 13: a step in the natural curvature, relaxed from a straight start, against solve_bvp."""
+    coarse, fine = run("perversion", 41), run("perversion", 81)
+    assert coarse["error"] < 5e-4                      # measured 2.1e-4 at n = 41 (40 cells)
+    assert fine["error"] < coarse["error"] / 3         # second order (step on a cell boundary)
+    assert fine["error_transverse_force"] < 1e-3 and fine["error_clamp_moment"] < 1e-3
+    assert fine["out_of_plane"] == 0.0 and fine["max_deflection"] > 0.02
+    # a step on a vertex (n - 1 odd) is reported, and still converges (first order there)
+    odd = run("perversion", 40)
+    assert odd["step_on_vertex"] and odd["error"] < 5e-3
+
+
 def test_helix_torque_matches_corrected_profiles_not_paper():
     coarse, fine = run("helix_torque", 60), run("helix_torque", 120)
     assert coarse["error"] < 2e-2                     # measured ~8e-3 at n = 60

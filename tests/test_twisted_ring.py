@@ -149,7 +149,7 @@ def test_planar_twisted_ring_has_uniform_twist():
 def test_michell_threshold(ratio):
     out = run("twisted_ring", 200, kappa0=0.0, A1=1.0, A2=1.0 / ratio, sweep=6)
     michell = cf.michell_twist(1.0, 1.0 / ratio)
-    assert out["threshold_located_by"].startswith("bisection")
+    assert out["threshold_located_by"].startswith("der.continuation") and out["threshold_kind"] == "bifurcation"
     assert abs(out["threshold_twist"] - michell) < 0.01 * michell
     # stable below, unstable above, on the planar branch
     before = [s for s in out["sweep"] if s["twist"] < michell]

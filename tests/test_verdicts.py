@@ -77,28 +77,74 @@ def test_load_whose_scale_is_not_finite_is_refused_before_the_solve(load, length
 # -- 2. a floor bound above 1 certifies nothing --------------------------------------------------------------
 
 def test_floor_verdict_refuses_a_floor_bound_above_one():
-    # issue 11.2: a free rod under a net force "converged below the floor 2.0" at residual 0.93. The floor
-    # grows with the distance from the origin: the same rod far away has a floor above 1.
-    rod = der.rod_from_shape(shapes.straight(1.0, 10), 1.0, 1.0, EA=1e6)
+    # issue 11.2: a free rod under a net force "converged below the floor 2.0" at residual 0.93. The floor grows
+    # with the stiffness against the load: an axial stiffness of 1e20 against a unit load puts it above 1.
+    rod = der.rod_from_shape(shapes.straight(1.0, 10), 1.0, 1.0, EA=1e20)
     scene = der.Scene(rod, loads=[der.end_force([0, 1, 0])], constraints=[der.pin(0)])
     system = build_system(scene, SolverOptions())
-    far = rod.rest_state()
-    far.q.reshape(-1, 4)[:, :3] += 1e10
-    state = prepare_state(system, far)
+    state = prepare_state(system, rod.rest_state())
     evaluate_system(system, state, 2)
     scales = load_scales(system, state)
     floor = residual_floor(system, state, scales)
     assert floor > FLOOR_MAX
     status, _, message = floor_verdict(system, state, scales, 0.5 * floor, 1e-8, "test")
     assert status == "stalled" and "certifies nothing" in message
-    # the same rod at the origin: a small floor, and a residual below it is a verdict at the floor
-    state = prepare_state(system, rod.rest_state())
+
+
+def _equilibrium(scene, tol=1e-12):
+    """A solved state of ``scene``, prepared and evaluated: (system, state, scales, floor)."""
+    res = solve_quiet(scene, tol=tol, stability=False)
+    assert res.converged
+    system = build_system(scene, SolverOptions())
+    state = prepare_state(system, res.state)
     evaluate_system(system, state, 2)
     scales = load_scales(system, state)
-    floor = residual_floor(system, state, scales)
+    return system, state, scales, residual_floor(system, state, scales)
+
+
+def test_floor_does_not_depend_on_where_the_rod_is():
+    # issue 17: coordinates far from the origin were rounded at eps |x|, and the floor grew with |x| (a rod 1e10
+    # away had a floor above 1). Edges are formed from compensated coordinates now: the floor, and the solve,
+    # are the same wherever the rod is.
+    floors = []
+    for offset in (0.0, 1e10):
+        s = straight(40)
+        rod = der.rod_from_shape(shapes.Shape(s.positions + offset, s.closed, s.director), 1.0, 1.0, EA=1e6)
+        scene = der.Scene(rod, loads=[der.end_force([0, 0, 1e-3])], constraints=[der.clamp("start")])
+        system = build_system(scene, SolverOptions())
+        state = prepare_state(system, rod.rest_state())
+        evaluate_system(system, state, 2)
+        floors.append(residual_floor(system, state, load_scales(system, state)))
+    assert floors[1] < 1e-4 and floors[1] == pytest.approx(floors[0], rel=1e-3)   # (edges rounded at ulp(1e10))
+
+
+def test_floor_verdict_at_an_equilibrium_is_converged_at_floor():
+    system, state, scales, floor = _equilibrium(cantilever(40, [0, 0, 1e-3], EA=1e6))
     assert floor < 1e-6
     status, _, message = floor_verdict(system, state, scales, 0.5 * floor, 1e-12, "test")
-    assert status == "converged_at_floor" and "times tol" in message
+    assert status == "converged_at_floor" and "times tol" in message and "Newton correction" in message
+
+
+@pytest.mark.parametrize("factor", [0.75, 0.99])
+def test_floor_verdict_refuses_a_state_whose_newton_correction_is_not_round_off(factor):
+    # issue 11 (ring_torsion --n 10000): a residual under the floor bound was the whole rule, and a ring whose
+    # Newton correction was 2.5 % of its displacement (error 27 % against the closed form) was certified
+    # "converged_at_floor". The same rule applied here to an equilibrium with its displacement scaled back by
+    # a few percent: under the floor bound, but not an equilibrium.
+    from der.closed_forms import ring_end_basis
+
+    rod = der.rod_from_shape(shapes.arc(1.0, 3.0, 60), 1.0, 1.0 / 0.67)
+    scene = der.Scene(rod, loads=[der.end_torque(1e-3 * ring_end_basis(1.0, 3.0)[0])],
+                      constraints=[der.clamp("start")])
+    system, state, scales, floor = _equilibrium(scene)
+    status, _, _ = floor_verdict(system, state, scales, 0.5 * floor, 1e-8, "test")
+    assert status == "converged_at_floor"
+    wrong = rod.rest_state()
+    wrong.q[:] = rod.rest_q + factor * (state.q - rod.rest_q)
+    wrong = prepare_state(system, wrong)
+    evaluate_system(system, wrong, 2)
+    status, _, message = floor_verdict(system, wrong, load_scales(system, wrong), 0.5 * floor, 1e-8, "test")
+    assert status == "stalled" and "not at its round-off floor" in message
 
 
 # -- 3. no equilibrium: refused before the solve; numerical failures become a status ----------------------------

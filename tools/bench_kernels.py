@@ -33,7 +33,7 @@ from numba import njit  # noqa: E402
 from der.energies.bend import _bend_local  # noqa: E402
 from der.energies.stretch import _stretch_local  # noqa: E402
 from der.energies.twist import _twist_local  # noqa: E402
-from der.geometry import add_transport_jacobian, edge_frames  # noqa: E402
+from der.geometry import add_transport_jacobian, edge_array, edge_frames  # noqa: E402
 from der.stencils import edge_dofs, expand_vertex_hessian, scatter_vertex_gradient, vertex_dofs  # noqa: E402
 
 # ---------------------------------------------------------------------------------------------
@@ -62,8 +62,9 @@ def legacy_hessian(plan, q, d1, reference_twist, lam, grad, ab, kl, ku, perm):
     H6 = np.empty((6, 6))
     d6 = np.empty(6, dtype=np.int64)
     energy = 0.0
+    E = edge_array(q, plan.edge_nodes)
     for j in range(plan.edge_nodes.shape[0]):
-        energy += _stretch_local(q, plan.edge_nodes, j, plan.l_bar[j], plan.k_stretch[j], lam[j], 2, g6, H6)
+        energy += _stretch_local(E, j, plan.l_bar[j], plan.k_stretch[j], lam[j], 2, g6, H6)
         edge_dofs(plan.edge_nodes, j, d6)
         for a in range(6):
             grad[d6[a]] += g6[a]

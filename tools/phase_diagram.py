@@ -12,7 +12,9 @@ measures the per-task overhead.
     python tools/phase_diagram.py [--json] [--scheduler tcp://HOST:PORT] [--workers 2] [--n 32] [--count 16]
                                   [--png docs/figures/phase_diagram.png] [--csv PATH] [--no-serial]
 
-Last line with --json: {"points", "worst_boundary_error", "serial_s", "cluster_s", "workers", ...}.
+Prints the serial and cluster runs side by side (wall, the tasks' CPU seconds, the cores each run obtained,
+speedup and the ideal one from the CPU obtained, per-task overhead). Last line with --json: {"points",
+"worst_boundary_error", "serial_s", "cluster_s", "workers", ...}.
 """
 import argparse
 import json
@@ -22,7 +24,7 @@ import time
 
 # one BLAS thread, as in Dask's workers (its nanny sets these): the serial run is then the same arithmetic, bit
 # for bit, and the comparison fair (multithreaded BLAS on 2 shared cores only spins)
-for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
     os.environ.setdefault(_name, "1")
 
 import numpy as np  # noqa: E402
@@ -157,6 +159,7 @@ def main(argv=None):
               file=sys.stderr)
         return 2
     grid = [{"A": A, "n": nn} for A in default_ratios(args.count) for nn in (args.n, 2 * args.n)]
+    load_before = os.getloadavg()
     der.warmup()
     serial = None
     if not args.no_serial:
@@ -186,6 +189,7 @@ def main(argv=None):
     if args.csv:
         clustered.to_csv(args.csv)
     compute = float(sum(clustered.task_seconds))
+    timing = timings(serial, clustered, workers, over, args.noop, startup)
     out = {
         "tool": "phase_diagram", "points": len(grid), "ratios": len(table), "n": [args.n, 2 * args.n],
         "worst_boundary_error": max(errors) if len(errors) == len(table) else None,
@@ -195,15 +199,16 @@ def main(argv=None):
         "kinds_agree": all(t.get("kinds_agree") for t in table),
         "failed": [r for r in clustered.rows if not r["ok"]],
         "serial_s": None if serial is None else serial.wall_time, "cluster_s": clustered.wall_time,
-        "workers": workers, "scheduler": args.scheduler or "local", "cluster_startup_s": startup,
+        "workers": workers, "scheduler": args.scheduler or "local",
         "speedup": None if serial is None else serial.wall_time / clustered.wall_time,
         "task_compute_s": compute,
         # what the cluster spends per task beyond the computation, with every worker busy
         "overhead_per_task_s": (workers * clustered.wall_time - compute) / len(grid),
-        "noop_task_s": None if over is None else over.wall_time / args.noop,
         "identical_to_serial": identical, "png": png,
+        **timing, "load_average": load_before + os.getloadavg(),
         "table": table,
     }
+    print(comparison_table(out))
     if args.json:
         print(json.dumps(_json(out), allow_nan=False))
     else:
@@ -212,6 +217,54 @@ def main(argv=None):
                   f"error {t.get('error')}")
         print({k: v for k, v in out.items() if k not in ("table", "failed")})
     return 0 if (identical in (None, True) and not out["failed"]) else 1
+
+
+def timings(serial, clustered, workers, over, noop, startup):
+    """What the runs cost: wall, the tasks' summed wall and CPU seconds, CPU per task, the cores each run
+    obtained (CPU seconds / wall seconds: on a shared machine below 1 per process), and the speedups.
+
+    ideal_speedup_from_cpu = cluster cores obtained / serial cores obtained: the speedup the CPU the machine
+    gave each run allows if a task costs the same CPU on a worker as serially; the measured speedup is that
+    times serial CPU per task / cluster CPU per task (the CPU the cluster path adds to each task)."""
+    n = len(clustered.rows)
+    c_cpu = float(sum(c for c in clustered.task_cpu_seconds if c is not None))
+    out = {"cluster_task_wall_s": float(sum(clustered.task_seconds)), "cluster_task_cpu_s": c_cpu,
+           "cluster_cpu_per_task_s": c_cpu / n, "cluster_cores_used": c_cpu / clustered.wall_time,
+           "cluster_cpu_utilisation": c_cpu / (max(workers, 1) * clustered.wall_time),
+           "noop_task_s": None if over is None else over.wall_time / noop, "cluster_startup_s": startup}
+    if serial is not None:
+        s_cpu = float(sum(serial.task_cpu_seconds))
+        out.update({"serial_task_cpu_s": s_cpu, "serial_cpu_per_task_s": s_cpu / n,
+                    "serial_cores_used": s_cpu / serial.wall_time,
+                    "ideal_speedup_from_cpu": (c_cpu / clustered.wall_time) / (s_cpu / serial.wall_time),
+                    "ideal_speedup_idle": max(workers, 1) * s_cpu / c_cpu})
+    return out
+
+
+def comparison_table(out):
+    """The serial and cluster runs side by side (text)."""
+    rows = [("run", "wall s", "task CPU s (sum)", "CPU per task ms", "cores obtained", "speedup")]
+    if out.get("serial_s") is not None:
+        rows.append(("serial", f"{out['serial_s']:.2f}", f"{out['serial_task_cpu_s']:.2f}",
+                     f"{1e3 * out['serial_cpu_per_task_s']:.0f}", f"{out['serial_cores_used']:.2f}", "1"))
+    rows.append((f"cluster ({out['scheduler']}, {out['workers']} workers)", f"{out['cluster_s']:.2f}",
+                 f"{out['cluster_task_cpu_s']:.2f}", f"{1e3 * out['cluster_cpu_per_task_s']:.0f}",
+                 f"{out['cluster_cores_used']:.2f}",
+                 "-" if out.get("speedup") is None else f"{out['speedup']:.2f}"))
+    w = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = ["| " + " | ".join(c.ljust(w[i]) for i, c in enumerate(r)) + " |" for r in rows]
+    lines.insert(1, "|" + "|".join("-" * (x + 2) for x in w) + "|")
+    if out.get("ideal_speedup_from_cpu") is not None:
+        lines.append(f"ideal speedup from the CPU obtained {out['ideal_speedup_from_cpu']:.2f} (measured "
+                     f"{out['speedup']:.2f}); on an idle machine at most {out['ideal_speedup_idle']:.2f}")
+    noop = out.get("noop_task_s")
+    lines.append(f"worker idle time per task {1e3 * out['overhead_per_task_s']:.1f} ms (Dask's overhead and the "
+                 "tail where one worker has no task left)"
+                 + (f", no-op task round trip {1e3 * noop:.1f} ms" if noop else "")
+                 + f"; cluster start/connect {out['cluster_startup_s']:.2f} s; load average "
+                   f"{', '.join(f'{x:.1f}' for x in out['load_average'][:3])} before, "
+                   f"{', '.join(f'{x:.1f}' for x in out['load_average'][3:])} after")
+    return "\n".join(lines)
 
 
 def _json(value):

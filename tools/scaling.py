@@ -19,19 +19,18 @@ iteration) and ``per_iteration_ratio_to_dgbsv``, the same in CPU time (``dgbsv_c
 ``per_iteration_cpu_ratio_to_dgbsv``, with the solver loop's CPU time ``solve_loop_cpu_s`` over the interval of
 ``wall_time``: less sensitive to the waits for a core on a loaded machine); the time split of the solve
 (``assembly_s``, ``factorisation_s``, ``line_search_s``, from ``SolveResult.timings``); the error against the
-closed form; and three round-off floors at the final state: ``residual_floor`` (the solver's bound eps |K| |q|),
-``noise_floor`` (measured: the residual that rounding every stored coordinate by half an ulp produces) and
-``noise_floor_displacement`` (measured the same way for a displacement u = x - x_start stored relative to the
-initial state, rounded at max(|u|, l): what a displacement-based evaluation would reach; der does not have
-one). Fitted: the exponent p of time per iteration, solve time, memory, setup, dgbsv and floor ~ n^p over the
-converged runs with n >= 1000.
+closed form; and three round-off floors at the final state: ``residual_floor`` (the solver's bound eps |K| w, w
+the rounding the kernels see: each edge at its own length), ``noise_floor`` (measured: the residual that rounding
+each edge at its own length produces, in the compensated coordinates' low parts) and ``noise_floor_absolute``
+(measured the same way for plain absolute coordinates rounded at half an ulp of |x|: the floor der had before
+compensated coordinates). Fitted: the exponent p of time per iteration, solve time, memory, setup, dgbsv and
+floor ~ n^p over the converged runs with n >= 1000.
 
-Limit: positions are absolute coordinates of size up to L, rounded at eps |x|; an edge of length h = L / n then
-carries eps L / h relative error, and the stiffness of the Newton matrix (stretching penalty and bending, ~ A1 /
-h^3) turns it into force noise eps |K| |x|: the floor grows like n^3 (ring torsion, fixed L) or n (helix winding,
-fixed h, L ~ n). The measured noise is 0.7x the bound, and a solve ends at 0.3-0.5x of it. Ring torsion is a
-global soft-mode response to a small torque: its floor passes 1e-8 below n = 1000 and the error follows the floor
-past n ~ 10^4 (issue 17).
+Positions are compensated pairs (``RodState.q_lo``) and edges are formed from them in one place
+(``geometry.edge_array``): an edge carries the rounding of its own length, eps h, not that of the coordinates,
+eps |x| (before: a floor growing like n^3 for ring torsion at fixed L, like n for helix winding at fixed h). What
+is left is the rounding of unit tangents and of the curvature binormal's cross product (eps absolute), which a
+node force of order A1 / h^2 turns into eps A1 n^2 / L^2 (docs/scaling.md).
 """
 import argparse
 import contextlib
@@ -52,14 +51,13 @@ sys.path.insert(0, os.path.join(HERE, ".."))
 TOL = 1e-8
 
 
-def rounding_noise(system, state, scales, reference, samples=3, seed=0):
-    """The residual that rounding the coordinates alone produces at ``state``, measured: the largest change of
-    the residual vector (in residual units) when every node coordinate moves by one rounding step in a random
-    direction, max over ``samples`` draws. With ``reference`` None the step is that of the stored absolute
-    coordinates (half an ulp of |x|): the floor der has. With a reference state it is the rounding step of a
-    displacement u = x - x_ref stored relative to it (half an ulp of max(|u|, l) per coordinate, l the edge length:
-    an edge evaluated as rest edge + (u_b - u_a) is rounded at its own length): the floor a displacement-based
-    evaluation would have (issue 17; not implemented in der)."""
+def rounding_noise(system, state, scales, absolute, samples=3, seed=0):
+    """The residual that rounding the state alone produces at ``state``, measured: the largest change of the
+    residual vector (in residual units) when the state moves by one rounding step in a random direction, max over
+    ``samples`` draws. With ``absolute`` the step is that of plain absolute coordinates (half an ulp of |x| per
+    coordinate, no low parts): the floor der had before compensated coordinates (issue 17). Otherwise it is the
+    rounding of each edge at its own length (half an ulp of the longest edge at a node, put into the low parts
+    ``q_lo``): the floor of der's compensated coordinates (``geometry.edge_array``)."""
     from der.solvers.system import evaluate_system, residual_norm, residual_vector
 
     rng = np.random.default_rng(seed)
@@ -68,15 +66,28 @@ def rounding_noise(system, state, scales, reference, samples=3, seed=0):
     R0 = residual_vector(system)
     pos = np.zeros(q.size, dtype=bool)
     pos.reshape(-1, 4)[:, :3] = True
-    if reference is None:
+    pos &= ~system.fixed
+    rod = system.rod
+    if absolute:
         size = np.abs(q)
     else:
-        size = np.maximum(np.abs(q - reference.q), float(system.rod.l_bar.min()))
+        le = np.linalg.norm(state.positions[rod.edge_nodes[:, 1]] - state.positions[rod.edge_nodes[:, 0]], axis=1)
+        node = np.zeros(rod.n_nodes)
+        np.maximum.at(node, rod.edge_nodes[:, 0], le)
+        np.maximum.at(node, rod.edge_nodes[:, 1], le)
+        size = np.repeat(node, 4)
     step = 0.5 * np.finfo(float).eps * size * pos
     worst = 0.0
     trial = state.copy()
+    lo = np.zeros_like(q) if state.q_lo is None else state.q_lo.copy()
     for _ in range(samples):
-        trial.q[:] = q + step * rng.choice([-1.0, 1.0], size=q.size)
+        signs = rng.choice([-1.0, 1.0], size=q.size)
+        if absolute:
+            trial.q[:] = q + step * signs
+            trial.q_lo = None
+        else:
+            trial.q[:] = q
+            trial.q_lo = lo + step * signs
         evaluate_system(system, trial, 1)
         worst = max(worst, residual_norm(system, residual_vector(system) - R0, scales))
     return worst
@@ -99,8 +110,8 @@ def dgbsv_seconds(scene, state, start=None, repeat=3):
     evaluate_system(system, st, 2)
     scales = load_scales(system, st)
     floor = residual_floor(system, st, scales)
-    noise = {"noise_floor": rounding_noise(system, st, scales, None),
-             "noise_floor_displacement": rounding_noise(system, st, scales, start)}
+    noise = {"noise_floor": rounding_noise(system, st, scales, False),
+             "noise_floor_absolute": rounding_noise(system, st, scales, True)}
     kl, ku, perm = system.kl, system.ku, system.perm
     best = best_cpu = np.inf
     for _ in range(repeat):   # assembled again each time rather than copied: no second band in memory
@@ -282,14 +293,15 @@ def main(argv=None):
                   file=sys.stderr)
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores (one used)")
     print(f"{'problem':<14} {'n':>7} {'iter':>5} {'solve s':>9} {'s/iter':>9} {'/dgbsv':>7} {'cpu':>5} {'residual':>9} "
-          f"{'floor':>8} {'error':>9} {'setup s':>8} {'RSS MB':>8} {'numpy MB':>9}  status")
+          f"{'floor':>8} {'noise':>8} {'noise|x|':>8} {'error':>9} {'setup s':>8} {'RSS MB':>8} {'numpy MB':>9}  status")
     for r in rows:
         if "solve_s" not in r:
             print(f"{r['problem']:<14} {r['n']:>7}  {r['status']}: {r['message']}")
             continue
         print(f"{r['problem']:<14} {r['n']:>7} {r['iterations']:>5} {r['solve_s']:>9.3f} {r['s_per_iteration']:>9.4f} "
-              f"{r['per_iteration_ratio_to_dgbsv']:>7.2f} {r['per_iteration_cpu_ratio_to_dgbsv']:>5.2f} {r['residual']:>9.1e} {r['residual_floor']:>8.1e} "
-              f"{r['error']:>9.1e} {r['setup_s']:>8.3f} {r['rss_growth_mb']:>8.1f} {r['traced_peak_mb']:>9.1f}  "
+              f"{r['per_iteration_ratio_to_dgbsv']:>7.2f} {r['per_iteration_cpu_ratio_to_dgbsv']:>5.2f} {r['residual']:>9.1e} "
+              f"{r['residual_floor']:>8.1e} {r['noise_floor']:>8.1e} {r['noise_floor_absolute']:>8.1e} {r['error']:>9.1e} "
+              f"{r['setup_s']:>8.3f} {r['rss_growth_mb']:>8.1f} {r['traced_peak_mb']:>9.1f}  "
               f"{r['status']}")
     fits = {}
     for problem in args.problems:

@@ -260,29 +260,27 @@ def greenhill(budget, quick):
     rod = der.rod_from_shape(der.shapes.straight(L, n, axis=(0, 0, 1)), A1, A2)
     rows = []
 
-    def turned(phi, state):
+    def scene_of(phi):
         R = np.array([[np.cos(phi), -np.sin(phi), 0], [np.sin(phi), np.cos(phi), 0], [0, 0, 1.0]])
-        scene = der.Scene(rod, constraints=[der.clamp("start"), der.clamp("end", rotation=R, slide=2)])
-        return solve(scene, budget, state=state)
+        return der.Scene(rod, constraints=[der.clamp("start"), der.clamp("end", rotation=R, slide=2)])
 
-    state = rod.rest_state()
-    lam = []
-    for phi in np.linspace(0.1, 1.2 * crit, 24):      # continuation: steps well below pi
-        res = turned(phi, state)
-        if not res.converged:
-            break
-        state = res.state
-        lam.append((phi, res.min_eigenvalue))
-    # where the lowest eigenvalue changes sign
-    cross = None
-    for (p0, l0), (p1, l1) in zip(lam, lam[1:]):
-        if l0 > 0 >= l1:
-            cross = p0 + (p1 - p0) * l0 / (l0 - l1)
+    # the straight branch followed by der.continuation (pseudo-arclength in the end rotation, the lowest
+    # eigenvalue at every point); the change of stability located by its secant on the lowest eigenvalue
+    branch = der.continuation(scene_of, 0.1, 1.2 * crit, parameter="phi", ds=0.15, ds_max=0.15, locate_tol=1e-9,
+                              max_steps=100, time_budget=budget, progress=False)
+    cross = next((sp["phi"] for sp in branch.special if sp["kind"] == "bifurcation"), None)
+    # the last point, at 1.2 x critical: a der.solve from it (converged at once) gives the row its SolveResult
+    res = solve(scene_of(branch.points[-1]["phi"]), budget, state=branch.states[-1])
+    state = res.state
     straight = float(np.abs(state.positions[:, :2]).max())
     row = {"case": f"Greenhill: clamped, far end sliding along the axis and turned to 1.2 x critical, n = {n}",
            "solver": "implicit", "n": n, **outcome(res, abs(cross - crit) / crit if cross else None, 2e-2,
-                                                   "eigenvalue sign change vs 8.9868 A1/A2 (disc. error ~1e-3)")}
+                                                   "eigenvalue sign change (der.continuation) vs 8.9868 A1/A2 "
+                                                   "(disc. error ~1e-3)")}
     row["threshold"] = cross
+    row["branch_points"] = len(branch.points)
+    row["branch_status"] = branch.status
+    row["stability_s"] = float(sum(p["stability_time"] for p in branch.points))
     row["lateral_deflection"] = straight
     rows.append(row)
     # kicked out of the unstable straight state (a small lateral bulge, clamped nodes left alone). Newton's

@@ -1,4 +1,4 @@
-"""Isotropic bending with natural curvature (bending stiffness A1), material curvatures per edge frame.
+"""Bending with natural curvature (stiffnesses A1, A1' per vertex), material curvatures per edge frame.
 
 Per vertex ``v`` joining edges ``e`` and ``f`` (Bergou et al. 2008, Sec. 4.2), with ``j`` either edge:
 
@@ -18,12 +18,18 @@ cos(alpha) + kappa0^2)``: the two sides sum to twice that, so ``E_v`` is ``D`` t
 density ``A1/2 (kappa^2 - 2 kappa kappa0 cos(alpha) + kappa0^2)`` (Eq. 17). ``kappa^j`` are integrated
 (dimensionless) curvatures; energies are in units of A1 / length.
 
-The local kernel takes the stiffness of each curvature component (``b1``, ``b2`` = A1 / D_v here), so that
-anisotropic bending (A1 != A1') or per-vertex stiffness only changes what the callers pass.
+The local kernel takes the stiffness of each curvature component (``b1 = A1_v / D_v`` for kappa1 = kb . m2,
+bending towards m1 about m2; ``b2 = A1'_v / D_v`` for kappa2 = -kb . m1, bending towards m2 about m1):
+
+    E_v = 1 / (4 D_v) sum_{j = e, f} [A1_v (kappa1^j - kappa1_bar^j)^2 + A1'_v (kappa2^j - kappa2_bar^j)^2]
+
+The ``A1`` argument of the loops is a float (isotropic, uniform: the results are bitwise those of a scalar
+stiffness), an (n_vertices,) array or an (n_vertices, 2) array of (A1, A1') (``energies.stiffness``).
 """
 import numpy as np
 from numba import njit
 
+from .stiffness import bending_at
 from ..stencils import (
     add_column, add_cross_matrix, add_identity, add_outer, add_sym_outer, edge_vectors, expand_vertex_hessian,
     scatter_band, scatter_vertex_gradient, vadd, vcross, vdot, vertex_dofs, vscale, vsub,
@@ -228,8 +234,8 @@ def bend_energy(ed, vertex_edges, weld, kappa_bar, voronoi, A1):
     (flat rows index faster than a 3-d array in the hot loop)."""
     total = 0.0
     for v in range(vertex_edges.shape[0]):
-        b = A1 / voronoi[v]
-        total += _bend_energy_local(ed, vertex_edges, weld, v, kappa_bar, b, b)
+        a1, a2 = bending_at(A1, v)
+        total += _bend_energy_local(ed, vertex_edges, weld, v, kappa_bar, a1 / voronoi[v], a2 / voronoi[v])
     return total
 
 
@@ -241,8 +247,8 @@ def bend_gradient(ed, vertex_nodes, vertex_edges, weld, kappa_bar, voronoi, A1, 
     work = np.empty((5, 8))
     total = 0.0
     for v in range(vertex_edges.shape[0]):
-        b = A1 / voronoi[v]
-        total += _bend_local(ed, vertex_edges, weld, v, kappa_bar, b, b, 1, g8, H8, work)
+        a1, a2 = bending_at(A1, v)
+        total += _bend_local(ed, vertex_edges, weld, v, kappa_bar, a1 / voronoi[v], a2 / voronoi[v], 1, g8, H8, work)
         scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
                                 vertex_edges[v, 0], vertex_edges[v, 1], g8)
     return total
@@ -258,8 +264,8 @@ def bend_hessian(ed, vertex_nodes, vertex_edges, weld, kappa_bar, voronoi, A1, g
     dofs = np.empty(11, dtype=np.int64)
     total = 0.0
     for v in range(vertex_edges.shape[0]):
-        b = A1 / voronoi[v]
-        total += _bend_local(ed, vertex_edges, weld, v, kappa_bar, b, b, 2, g8, H8, work)
+        a1, a2 = bending_at(A1, v)
+        total += _bend_local(ed, vertex_edges, weld, v, kappa_bar, a1 / voronoi[v], a2 / voronoi[v], 2, g8, H8, work)
         scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
                                 vertex_edges[v, 0], vertex_edges[v, 1], g8)
         expand_vertex_hessian(H8, H11)

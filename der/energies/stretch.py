@@ -14,16 +14,17 @@ The tension carried by edge j is ``lam_j + k_j g_j`` (units of force).
 import numpy as np
 from numba import njit
 
+from ..geometry import edge_array
 from ..stencils import edge_dofs, scatter_band, scatter_gradient
 
 
 @njit(cache=True)
-def _stretch_local(q, edge_nodes, j, l_bar, k, lam, order, g6, H6):
-    a = 4 * edge_nodes[j, 0]
-    b = 4 * edge_nodes[j, 1]
-    e0 = q[b] - q[a]
-    e1 = q[b + 1] - q[a + 1]
-    e2 = q[b + 2] - q[a + 2]
+def _stretch_local(E, j, l_bar, k, lam, order, g6, H6):
+    """Energy of edge j; gradient ``g6`` in (x_a, x_b) with order >= 1, Hessian ``H6`` with order >= 2. ``E``:
+    the edge vectors (``geometry.edge_array``)."""
+    e0 = E[j, 0]
+    e1 = E[j, 1]
+    e2 = E[j, 2]
     le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
     g = le - l_bar
     energy = lam * g + 0.5 * k * g * g
@@ -50,24 +51,26 @@ def _stretch_local(q, edge_nodes, j, l_bar, k, lam, order, g6, H6):
 
 
 @njit(cache=True)
-def stretch_energy(q, edge_nodes, l_bar, k, lam):
+def stretch_energy(q, edge_nodes, l_bar, k, lam, E=None):
     """Total stretching energy (including the multiplier term)."""
+    Ee = edge_array(q, edge_nodes) if E is None else E
     g6 = np.empty(6)
     H6 = np.empty((6, 6))
     total = 0.0
     for j in range(edge_nodes.shape[0]):
-        total += _stretch_local(q, edge_nodes, j, l_bar[j], k[j], lam[j], 0, g6, H6)
+        total += _stretch_local(Ee, j, l_bar[j], k[j], lam[j], 0, g6, H6)
     return total
 
 
 @njit(cache=True)
-def stretch_gradient(q, edge_nodes, l_bar, k, lam, grad):
+def stretch_gradient(q, edge_nodes, l_bar, k, lam, grad, E=None):
     """Add the stretching gradient to ``grad``; returns the energy."""
+    Ee = edge_array(q, edge_nodes) if E is None else E
     g6 = np.empty(6)
     H6 = np.empty((6, 6))
     total = 0.0
     for j in range(edge_nodes.shape[0]):
-        total += _stretch_local(q, edge_nodes, j, l_bar[j], k[j], lam[j], 1, g6, H6)
+        total += _stretch_local(Ee, j, l_bar[j], k[j], lam[j], 1, g6, H6)
         a = 4 * edge_nodes[j, 0]
         b = 4 * edge_nodes[j, 1]
         for i in range(3):
@@ -77,17 +80,18 @@ def stretch_gradient(q, edge_nodes, l_bar, k, lam, grad):
 
 
 @njit(cache=True)
-def stretch_hessian(q, edge_nodes, l_bar, k, lam, grad, ab, kl, ku, perm):
+def stretch_hessian(q, edge_nodes, l_bar, k, lam, grad, ab, kl, ku, perm, E=None):
     """Add gradient to ``grad`` and Hessian to the band matrix ``ab``; returns the energy.
 
     (Edited with ``stencils.scatter_band``: numba's cache keys a kernel on its own file only, so a kernel whose
     helper in another file changed keeps the old helper compiled in until its own file changes.)"""
+    Ee = edge_array(q, edge_nodes) if E is None else E
     g6 = np.empty(6)
     H6 = np.empty((6, 6))
     dofs = np.empty(6, dtype=np.int64)
     total = 0.0
     for j in range(edge_nodes.shape[0]):
-        total += _stretch_local(q, edge_nodes, j, l_bar[j], k[j], lam[j], 2, g6, H6)
+        total += _stretch_local(Ee, j, l_bar[j], k[j], lam[j], 2, g6, H6)
         edge_dofs(edge_nodes, j, dofs)
         scatter_gradient(grad, dofs, g6, 1.0)
         scatter_band(ab, kl, ku, perm, dofs, H6, 1.0)
@@ -95,15 +99,14 @@ def stretch_hessian(q, edge_nodes, l_bar, k, lam, grad, ab, kl, ku, perm):
 
 
 @njit(cache=True)
-def elongations(q, edge_nodes, l_bar):
-    """g_j = |e_j| - l_j for all edges."""
+def elongations(q, edge_nodes, l_bar, E=None):
+    """g_j = |e_j| - l_j for all edges (edges ``E`` from ``geometry.edge_array`` when given, else from q)."""
+    Ee = edge_array(q, edge_nodes) if E is None else E
     n = edge_nodes.shape[0]
     out = np.empty(n)
     for j in range(n):
-        a = 4 * edge_nodes[j, 0]
-        b = 4 * edge_nodes[j, 1]
-        e0 = q[b] - q[a]
-        e1 = q[b + 1] - q[a + 1]
-        e2 = q[b + 2] - q[a + 2]
+        e0 = Ee[j, 0]
+        e1 = Ee[j, 1]
+        e2 = Ee[j, 2]
         out[j] = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2) - l_bar[j]
     return out

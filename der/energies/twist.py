@@ -1,4 +1,4 @@
-"""Twisting with natural twist (twisting stiffness A2).
+"""Twisting with natural twist (twisting stiffness A2: a float, or one per vertex).
 
 Per vertex ``v`` joining edges ``e`` and ``f``:
 
@@ -17,6 +17,7 @@ theta_e + reference_twist_v``. The bending kernel turns that frame by the same a
 import numpy as np
 from numba import njit
 
+from .stiffness import twisting_at
 from ..stencils import (
     add_cross_matrix, add_outer, add_sym_outer, edge_vectors, expand_vertex_hessian, scatter_band,
     scatter_vertex_gradient, vadd, vcross, vdot, vertex_dofs, vscale,
@@ -84,7 +85,7 @@ def twist_energy(q, vertex_edges, reference_twist, weld, twist_bar, voronoi, A2)
     total = 0.0
     for v in range(vertex_edges.shape[0]):
         r = material_twist(q, vertex_edges, reference_twist, weld, v) - twist_bar[v]
-        total += 0.5 * A2 / voronoi[v] * r * r
+        total += 0.5 * twisting_at(A2, v) / voronoi[v] * r * r
     return total
 
 
@@ -96,8 +97,8 @@ def twist_gradient(q, ed, vertex_nodes, vertex_edges, reference_twist, weld, twi
     work = np.empty((5, 8))
     total = 0.0
     for v in range(vertex_edges.shape[0]):
-        total += _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v], A2 / voronoi[v], 1, g8, H8,
-                              work)
+        total += _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v],
+                              twisting_at(A2, v) / voronoi[v], 1, g8, H8, work)
         scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
                                 vertex_edges[v, 0], vertex_edges[v, 1], g8)
     return total
@@ -114,8 +115,8 @@ def twist_hessian(q, ed, vertex_nodes, vertex_edges, reference_twist, weld, twis
     dofs = np.empty(11, dtype=np.int64)
     total = 0.0
     for v in range(vertex_edges.shape[0]):
-        total += _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v], A2 / voronoi[v], 2, g8, H8,
-                              work)
+        total += _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v],
+                              twisting_at(A2, v) / voronoi[v], 2, g8, H8, work)
         scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
                                 vertex_edges[v, 0], vertex_edges[v, 1], g8)
         expand_vertex_hessian(H8, H11)

@@ -9,8 +9,10 @@ edges' own scatter. The math is that of ``energies.bend`` and ``energies.twist``
 import numpy as np
 from numba import njit
 
+from ..geometry import edge_array
 from ..stencils import expand_vertex_hessian, scatter_band, scatter_vertex_gradient, vertex_dofs
 from .bend import _bend_local
+from .stiffness import bending_at, twisting_at
 from .stretch import _stretch_local
 from .twist import _twist_local
 
@@ -28,9 +30,10 @@ def bend_twist_hessian(q, ed, vertex_nodes, vertex_edges, reference_twist, weld,
     e_bend = 0.0
     e_twist = 0.0
     for v in range(vertex_edges.shape[0]):
-        b = A1 / voronoi[v]
-        e_bend += _bend_local(ed, vertex_edges, weld, v, kappa_bar, b, b, 2, g8, H8, work)
-        e_twist += _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v], A2 / voronoi[v], 2, g8,
+        a1, a2 = bending_at(A1, v)
+        e_bend += _bend_local(ed, vertex_edges, weld, v, kappa_bar, a1 / voronoi[v], a2 / voronoi[v], 2, g8, H8, work)
+        e_twist += _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v],
+                                twisting_at(A2, v) / voronoi[v], 2, g8,
                                 H8, work, True)   # added onto the bending of the same vertex
         scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
                                 vertex_edges[v, 0], vertex_edges[v, 1], g8)
@@ -46,10 +49,11 @@ _EDGE_IN_STENCIL = ((0, 1, 2, 4, 5, 6), (4, 5, 6, 8, 9, 10))
 
 @njit(cache=True)
 def stretch_bend_twist_hessian(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_stretch, lam, reference_twist,
-                               weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, kl, ku, perm):
+                               weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, kl, ku, perm, E=None):
     """``bend_twist_hessian`` plus the stretching of every edge (as ``stretch_hessian``), each edge added into the
     stencil of the first vertex that holds it (its edge after, else before). Returns ``(stretch, bending,
-    twisting)`` energies."""
+    twisting)`` energies. ``E``: the edge vectors (``geometry.edge_array``; formed from ``q`` if None)."""
+    Ee = edge_array(q, edge_nodes) if E is None else E
     n_edges = edge_nodes.shape[0]
     g8 = np.empty(8)
     H8 = np.empty((8, 8))
@@ -69,9 +73,10 @@ def stretch_bend_twist_hessian(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_
                 side[j] = s
     e_stretch = e_bend = e_twist = 0.0
     for v in range(vertex_edges.shape[0]):
-        b = A1 / voronoi[v]
-        e_bend += _bend_local(ed, vertex_edges, weld, v, kappa_bar, b, b, 2, g8, H8, work)
-        e_twist += _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v], A2 / voronoi[v], 2, g8,
+        a1, a2 = bending_at(A1, v)
+        e_bend += _bend_local(ed, vertex_edges, weld, v, kappa_bar, a1 / voronoi[v], a2 / voronoi[v], 2, g8, H8, work)
+        e_twist += _twist_local(q, ed, vertex_edges, reference_twist, weld, v, twist_bar[v],
+                                twisting_at(A2, v) / voronoi[v], 2, g8,
                                 H8, work, True)
         scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
                                 vertex_edges[v, 0], vertex_edges[v, 1], g8)
@@ -80,7 +85,7 @@ def stretch_bend_twist_hessian(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_
             j = vertex_edges[v, s]
             if owner[j] != v or side[j] != s:
                 continue
-            e_stretch += _stretch_local(q, edge_nodes, j, l_bar[j], k_stretch[j], lam[j], 2, g6, H6)
+            e_stretch += _stretch_local(Ee, j, l_bar[j], k_stretch[j], lam[j], 2, g6, H6)
             a = 4 * edge_nodes[j, 0]
             c = 4 * edge_nodes[j, 1]
             for i in range(3):
@@ -94,7 +99,7 @@ def stretch_bend_twist_hessian(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_
         scatter_band(ab, kl, ku, perm, dofs, H11, 1.0)
     for j in range(n_edges):   # edges on no vertex (a single-edge rod)
         if owner[j] < 0:
-            e_stretch += _stretch_local(q, edge_nodes, j, l_bar[j], k_stretch[j], lam[j], 2, g6, H6)
+            e_stretch += _stretch_local(Ee, j, l_bar[j], k_stretch[j], lam[j], 2, g6, H6)
             a = 4 * edge_nodes[j, 0]
             c = 4 * edge_nodes[j, 1]
             for i in range(3):

@@ -224,6 +224,11 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
     are honoured whatever ``check_every`` is.
     """
     rod = system.rod
+    if state.q_lo is not None:
+        # the FIRE kernel steps the coordinates alone (no compensated low parts): fold them in, and let the
+        # floor bound see plain absolute coordinates (system.rounding_scale)
+        state.q += state.q_lo
+        state.q_lo = None
     project = rod.inextensible
     fixed = system.fixed
     w = inverse_mass(system)

@@ -310,15 +310,15 @@ def warmup():
         return 0.0
     import time
 
-    from .. import rod as _rod
     from .. import shapes
+    from ..rod import rod_from_shape
     from ..scene import Scene
     from ..terms.contact import self_contact
     from . import solve
 
     _WARM.append(0.0)              # (the solve below calls this again)
     t0 = time.perf_counter()
-    base = _rod.rod_from_shape(shapes.ring(1.0, 24), 1.0, 1.5)
+    base = rod_from_shape(shapes.ring(1.0, 24), 1.0, 1.5)
     ring = base.with_natural(kappa_bar=base.kappa_bar * 0.0)
     solve(Scene(ring, contacts=[self_contact(0.02)]), solver="explicit", max_steps=20, stability=False,
           raise_on_failure=False)

@@ -24,6 +24,7 @@ import time
 
 import numpy as np
 
+from ..geometry import add_compensated
 from ..linalg import add_diagonal, band_solve, band_to_coo, constrain_band, dot, dot_abs
 from .system import (
     FLOOR_FACTOR, INTERRUPTS, constrain_system, constraint_residual, energy_terms, evaluate_system, expand,
@@ -216,9 +217,14 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 a_start = a
                 t_phase = time.perf_counter()
                 for _ls in range(options.line_search_steps):
-                    np.multiply(delta, a, out=q_trial)
-                    q_trial += state.q
-                    if transport(system, state, q_trial, trial):
+                    if getattr(state, "q_lo", None) is not None and getattr(trial, "q_lo", None) is not None:
+                        add_compensated(state.q, state.q_lo, a, delta, trial.q, trial.q_lo)
+                        q_new = trial.q
+                    else:       # a state without low parts (prepared elsewhere): plain coordinates
+                        np.multiply(delta, a, out=q_trial)
+                        q_trial += state.q
+                        q_new = q_trial
+                    if transport(system, state, q_new, trial):
                         e_trial = evaluate_system(system, trial, 0)
                         merit = e_trial - energy - a * dot(fext, delta)
                         slack = 1e-13 * (abs(energy) + abs(e_trial)) + 1e-300

@@ -35,6 +35,7 @@ class RodGroup:
         self.edge_nodes = np.ascontiguousarray(np.concatenate(
             [r.edge_nodes + self.node_offsets[i] for i, r in enumerate(rods)]), dtype=np.int64)
         self.l_bar = np.concatenate([r.l_bar for r in rods])
+        self.rest_q = np.concatenate([r.rest_q for r in rods])
         self.A1 = float(max(np.max(r.A1) for r in rods))
         self.closed = False
         self.inextensible = any(r.inextensible for r in rods)
@@ -55,6 +56,10 @@ class MultiState:
     >>> result = der.solve(der.Scene([scene_a, scene_b]))     # doctest: +SKIP
     >>> result.state.rods[1].positions                        # doctest: +SKIP
     """
+
+    # plain coordinates: the scene's q has no low parts (each rod's view keeps zero ones), so the solvers' floor
+    # bound sees the rounding of absolute coordinates (system.rounding_scale)
+    q_lo = None
 
     def __init__(self, rods):
         self.q = np.concatenate([r.q for r in rods])

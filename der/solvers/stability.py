@@ -225,11 +225,16 @@ def _m_orthonormal(V, m):
 
     V = V / np.sqrt(np.einsum("ij,i,ij->j", V, m, V))[None, :]
     _, R, piv = la.qr(V * np.sqrt(m)[:, None], mode="economic", pivoting=True)
-    rank = int(np.sum(np.abs(np.diag(R)) > 1e-8 * abs(R[0, 0])))
-    # M-orthonormalise the independent columns through V itself (massless DOFs keep their part of the mode)
+    # symmetry modes are either independent (|R_kk| ~ |R_00|) or dependent up to round-off in the state: cut at 1e-6
+    rank = int(np.sum(np.abs(np.diag(R)) > 1e-6 * abs(R[0, 0])))
+    # M-orthonormalise the independent columns through V itself (massless DOFs keep their part of the mode).
+    # By the eigenvectors of their Gram matrix rather than its Cholesky factor: two modes that coincide to 1e-9
+    # (a ring round to round-off, whose material sliding is a rotation about its axis) may pass the rank test
+    # and leave a Gram matrix that Cholesky refuses ("not positive definite", loop_twist --locate)
     Vk = V[:, np.sort(piv[:rank])]
-    Lc = np.linalg.cholesky(Vk.T @ (m[:, None] * Vk))
-    return np.linalg.solve(Lc, Vk.T).T
+    w, U = np.linalg.eigh(Vk.T @ (m[:, None] * Vk))
+    keep = w > 1e-12 * w.max()
+    return (Vk @ U[:, keep]) / np.sqrt(w[keep])[None, :]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -372,7 +377,7 @@ def _banded_lowest(system, K, idx, mass, m, V, k, symmetric, scale):
     n = idx.size
     # sigma: below zero by a small fraction of the bending scale, so that an exact (unexpected) zero mode
     # leaves K - sigma M regular; the eigenvalues nearest it are the lowest and any negative ones near zero
-    bend_scale = rod.A1 / (rod.rho_A * rod.length ** 4)
+    bend_scale = rod.bending_scale / (rod.rho_A * rod.length ** 4)
     sigma = -1e-3 * bend_scale
     ab = system.ab.copy(order="F")
     add_diagonal(ab, system.kl, system.ku, system.perm, mass, -sigma)
@@ -469,7 +474,8 @@ def stability(system, result, n_eigenvalues=6):
     if symmetric and out["method"] != "dense":
         # shift-invert finds the eigenvalues nearest sigma: count all negative ones (below the floor) by
         # inertia as a check
-        shift = -max(float(out["floors"].max()), 1e-3 * system.rod.A1 / (system.rod.rho_A * system.rod.length ** 4))
+        shift = -max(float(out["floors"].max()),
+                     1e-3 * system.rod.bending_scale / (system.rod.rho_A * system.rod.length ** 4))
         n_neg = band_negative_pivots(system.ab, system.kl, system.ku, system.perm, shift, eigen_mass(system.rod),
                                      ~_free_full(system))
         found = int(np.sum(ev.real < shift))

@@ -48,7 +48,7 @@ def warmup():
 
     import numpy as np
 
-    from .. import rod as _rod
+    from ..rod import rod_from_shape   # der.rod is the constructor function (issue 13), not this module
     from .. import shapes
     from ..scene import Scene
     from ..solvers.options import SolverOptions
@@ -57,7 +57,7 @@ def warmup():
     t0 = time.perf_counter()
     for closed in (True, False):
         shape = shapes.ring(1.0, 24) if closed else shapes.straight(1.0, 24)
-        r = _rod.rod_from_shape(shape, 1.0, 1.5)
+        r = rod_from_shape(shape, 1.0, 1.5)
         terms = [contact.self_contact(0.02), obstacles.plane([0, 0, -1], [0, 0, 1]),
                  obstacles.sphere([0, 0, -3], 1.0), obstacles.cylinder([0, 5, 0], [1, 0, 0], 1.0)]
         system = build_system(Scene(r, contacts=terms), SolverOptions())

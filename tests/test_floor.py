@@ -1,0 +1,101 @@
+"""The round-off floor at its root (issue 17): compensated coordinates, edges formed in one place, and a floor
+bound that the measured rounding noise stays under."""
+import warnings
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+import der
+from der import closed_forms as cf
+from der.geometry import add_compensated, edge_array, edge_frames
+from der.solvers import SolverOptions
+from der.solvers.system import (
+    build_system, evaluate_system, load_scales, prepare_state, residual_floor, residual_norm, residual_vector,
+)
+
+
+def test_add_compensated_keeps_what_the_sum_rounds_away():
+    rng = np.random.default_rng(1)
+    q = rng.uniform(-3.0, 3.0, 200)
+    lo = np.zeros_like(q)
+    exact = [Fraction(x) for x in q]
+    for _ in range(20):   # many small steps: plain sums lose their low bits at every one
+        d = 1e-9 * rng.standard_normal(q.size)
+        add_compensated(q, lo, 0.37, d, q, lo)
+        exact = [e + Fraction(0.37 * di) for e, di in zip(exact, d)]
+    for x, l, e in zip(q, lo, exact):
+        assert abs(l) <= 0.5 * abs(np.spacing(x))
+        # the pair is exact to the rounding of its low part (~eps^2 |x|), a plain sum only to eps |x| per step
+        assert abs(Fraction(x) + Fraction(l) - e) <= Fraction(1e-28)
+
+
+def test_edge_array_forms_edges_from_both_parts():
+    rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, 1, 30), 1.0, 1.5)
+    q = rod.rest_q + 1e6                   # far from the origin: each coordinate rounded at 1e-10
+    lo = np.zeros_like(q)
+    lo.reshape(-1, 4)[:, :3] = np.random.default_rng(2).uniform(-1e-10, 1e-10, (rod.n_nodes, 3))
+    E = edge_array(q, rod.edge_nodes, lo)
+    x = [[Fraction(q[4 * k + c]) + Fraction(lo[4 * k + c]) for c in range(3)] for k in range(rod.n_nodes)]
+    for j, (a, b) in enumerate(rod.edge_nodes):
+        for c in range(3):
+            exact = x[b][c] - x[a][c]
+            assert abs(Fraction(E[j, c]) - exact) <= abs(exact) * Fraction(2.3e-16) + Fraction(1e-300)
+    # without low parts: the plain differences, bitwise what edge_frames forms itself
+    assert np.array_equal(edge_frames(q, rod.edge_nodes, rod.rest_d1),
+                          edge_frames(q, rod.edge_nodes, rod.rest_d1, edge_array(q, rod.edge_nodes)))
+
+
+def test_readme_example_converges_below_tol():
+    # issue 17: the README's example ended "converged_at_floor" at 1.6e-7 (tol 1e-8): the floor of absolute
+    # coordinates. With compensated coordinates it reaches tol.
+    rod = der.rod_from_shape(der.shapes.helix(kappa0=1.0, omega0=0.6, turns=1, n=200), A1=1.0, A2=1.5)
+    scene = der.Scene(rod, loads=[der.end_force([0, 0, 1e-3]), der.end_torque(2e-3, follower=True)],
+                      constraints=[der.clamp("start")])
+    res = der.solve(scene, stability=False)
+    assert res.status == "converged" and res.residual <= 1e-8, res.message
+
+
+def test_a_rod_far_from_the_origin_solves_like_one_at_it():
+    # the floor of absolute coordinates grew with the distance from the origin; compensated coordinates make the
+    # solve translation invariant (to the rounding of the rest edges at ulp(1e6) = 1e-10)
+    out = []
+    for offset in (0.0, 1e6):
+        s = der.shapes.straight(1.0, 100, axis=(1, 0, 0), director=(0, 1, 0))
+        rod = der.rod_from_shape(der.shapes.Shape(s.positions + offset, s.closed, s.director), 1.0, 1.0)
+        scene = der.Scene(rod, loads=[der.end_force([0, 0, 1e-4])], constraints=[der.clamp("start")])
+        res = der.solve(scene, stability=False, raise_on_failure=False)
+        out.append(res)
+        assert res.status == "converged" and res.residual <= 1e-8, (offset, res.status, res.message)
+    tip = [r.state.positions[-1, 2] - 1e6 * k for k, r in enumerate(out)]
+    assert tip[1] == pytest.approx(tip[0], rel=1e-5)
+
+
+@pytest.mark.parametrize("n", [100, 400])
+def test_measured_rounding_noise_stays_under_the_floor_bound(n):
+    # the bound eps |K| w must bound what rounding each edge at its own length does to the residual
+    A1, A2, a0, L, T = 1.0, 1.0 / 0.67, 1.0, 3.0, 1e-3
+    rod = der.rod_from_shape(der.shapes.arc(a0, L, n), A1, A2)
+    scene = der.Scene(rod, loads=[der.end_torque(T * cf.ring_end_basis(a0, L)[0])],
+                      constraints=[der.clamp("start")])
+    res = der.solve(scene, stability=False, tol=1e-12, raise_on_failure=False)
+    system = build_system(scene, SolverOptions())
+    state = prepare_state(system, res.state)
+    evaluate_system(system, state, 2)
+    scales = load_scales(system, state)
+    bound = residual_floor(system, state, scales)
+    R0 = residual_vector(system).copy()
+    le = np.linalg.norm(np.diff(state.positions, axis=0), axis=1)
+    node = np.maximum(np.r_[le, 0.0], np.r_[0.0, le])
+    rng = np.random.default_rng(3)
+    worst = 0.0
+    for _ in range(5):
+        trial = state.copy()
+        step = 0.5 * np.finfo(float).eps * np.repeat(node, 4) * rng.choice([-1.0, 1.0], rod.n_dof)
+        step[3::4] = 0.0
+        step[system.fixed] = 0.0
+        trial.q_lo = state.q_lo + step
+        evaluate_system(system, trial, 1)
+        worst = max(worst, residual_norm(system, residual_vector(system) - R0, scales))
+    assert 0.0 < worst <= bound
+    assert bound < 1e-8 * (n / 100) ** 2      # grows like n^2 (not n^3 as with absolute coordinates)

@@ -15,7 +15,9 @@ Reported per run (a JSON row with ``--json``): ``problem``, ``n``, ``converged``
 ``tol``, iterations, ``solve_s``, ``setup_s`` (shape, rod and initial state), ``s_per_iteration``, ``dgbsv_s``
 (one LAPACK banded factor-and-solve of the same Newton matrix, timed in the same process after the solve, best
 of 3 -- the iterations are averages, so on a shared machine the ratio leans against der: the floor of a Newton
-iteration) and ``per_iteration_ratio_to_dgbsv``; the time split of the solve
+iteration) and ``per_iteration_ratio_to_dgbsv``, the same in CPU time (``dgbsv_cpu_s``,
+``per_iteration_cpu_ratio_to_dgbsv``, with the solver loop's CPU time ``solve_loop_cpu_s`` over the interval of
+``wall_time``: less sensitive to the waits for a core on a loaded machine); the time split of the solve
 (``assembly_s``, ``factorisation_s``, ``line_search_s``, from ``SolveResult.timings``); the error against the
 closed form; and three round-off floors at the final state: ``residual_floor`` (the solver's bound eps |K| w, w
 the rounding the kernels see: each edge at its own length), ``noise_floor`` (measured: the residual that rounding
@@ -31,6 +33,7 @@ is left is the rounding of unit tangents and of the curvature binormal's cross p
 node force of order A1 / h^2 turns into eps A1 n^2 / L^2 (docs/scaling.md).
 """
 import argparse
+import contextlib
 import json
 import os
 import platform
@@ -94,7 +97,8 @@ def dgbsv_seconds(scene, state, start=None, repeat=3):
     """Seconds of one LAPACK banded factor-and-solve (``dgbsv``) of the Newton matrix of ``scene`` at ``state``
     -- what one Newton iteration cannot go below -- measured here, beside der's iteration (best of ``repeat``;
     the copy of the band that dgbsv overwrites is timed apart and not counted). Also returns the round-off
-    floor of the residual at ``state`` (``residual_floor``: eps |K| |q| against the force scale)."""
+    floor of the residual at ``state`` (``residual_floor``: eps |K| |q| against the force scale), and in the
+    dict the CPU seconds of the same dgbsv (``dgbsv_cpu_s``, process time, best of ``repeat``)."""
     import der
     from der.linalg import add_diagonal, band_solve, constrain_band
     from der.solvers.system import (
@@ -109,7 +113,7 @@ def dgbsv_seconds(scene, state, start=None, repeat=3):
     noise = {"noise_floor": rounding_noise(system, st, scales, False),
              "noise_floor_absolute": rounding_noise(system, st, scales, True)}
     kl, ku, perm = system.kl, system.ku, system.perm
-    best = np.inf
+    best = best_cpu = np.inf
     for _ in range(repeat):   # assembled again each time rather than copied: no second band in memory
         evaluate_system(system, st, 2)
         ab = system.ab
@@ -118,9 +122,11 @@ def dgbsv_seconds(scene, state, start=None, repeat=3):
         add_diagonal(ab, kl, ku, perm, diag, 1e-3)
         constrain_band(ab, kl, ku, perm, system.fixed, 1.0)
         R = residual_vector(system)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         band_solve(ab, kl, ku, perm, R)
         best = min(best, time.perf_counter() - t0)
+        best_cpu = min(best_cpu, time.process_time() - c0)
+    noise["dgbsv_cpu_s"] = best_cpu
     return best, floor, noise
 
 
@@ -136,8 +142,9 @@ def single(problem, n, time_budget=120.0, trace=True):
     scene, state, error = _problem(problem, n)
     setup_s = time.perf_counter() - t0
     cpu0 = resource.getrusage(resource.RUSAGE_SELF)
-    res = der.solve(scene, state=state, stability=False, raise_on_failure=False,
-                    options=der.SolverOptions(time_budget=time_budget, tol=TOL))
+    with _loop_cpu_time() as loop_cpu:
+        res = der.solve(scene, state=state, stability=False, raise_on_failure=False,
+                        options=der.SolverOptions(time_budget=time_budget, tol=TOL))
     cpu1 = resource.getrusage(resource.RUSAGE_SELF)
     peak_rss = cpu1.ru_maxrss
     s_per_iteration = res.wall_time / max(res.iterations, 1)
@@ -148,7 +155,12 @@ def single(problem, n, time_budget=120.0, trace=True):
            "s_per_iteration": s_per_iteration, "dgbsv_s": t_dgbsv,
            # CPU seconds of the solve (user, system): on a shared machine wall time also counts other processes
            "solve_cpu_user_s": cpu1.ru_utime - cpu0.ru_utime, "solve_cpu_system_s": cpu1.ru_stime - cpu0.ru_stime,
-           "per_iteration_ratio_to_dgbsv": s_per_iteration / t_dgbsv, "residual": res.residual,
+           "per_iteration_ratio_to_dgbsv": s_per_iteration / t_dgbsv,
+           # the same ratio in CPU time (the solve's user + system time per iteration against dgbsv's): on a
+           # loaded machine wall time also counts the waits for a core, which fall unevenly on the two
+           "solve_loop_cpu_s": loop_cpu["s"],
+           "per_iteration_cpu_ratio_to_dgbsv": loop_cpu["s"] / max(res.iterations, 1) / noise["dgbsv_cpu_s"],
+           "residual": res.residual,
            "residual_floor": floor, **noise, "message": res.message, "error": error(res.state),
            "rss_growth_mb": (peak_rss - base_rss) / 1024.0, "peak_rss_mb": peak_rss / 1024.0,
            "rss_per_edge_kb": (peak_rss - base_rss) / n, "compile_s": compile_s,
@@ -164,6 +176,33 @@ def single(problem, n, time_budget=120.0, trace=True):
     tracemalloc.stop()
     out["traced_peak_mb"] = traced_peak / 2 ** 20
     return out
+
+
+@contextlib.contextmanager
+def _loop_cpu_time():
+    """Process CPU seconds of the implicit solver over the interval its ``wall_time`` covers: from the entry of
+    ``solve_implicit`` to the entry of its last ``final_result`` (the system's setup before and the result's
+    diagnostics after are not counted, as in ``wall_time``). Yields a dict whose "s" is set on exit."""
+    from der.solvers import implicit
+
+    marks = {"s": float("nan")}
+    orig_solve, orig_final = implicit.solve_implicit, implicit.final_result
+
+    def solve_implicit(*args, **kwargs):
+        marks["start"] = time.process_time()
+        return orig_solve(*args, **kwargs)
+
+    def final_result(*args, **kwargs):
+        marks["end"] = time.process_time()
+        return orig_final(*args, **kwargs)
+
+    implicit.solve_implicit, implicit.final_result = solve_implicit, final_result
+    try:
+        yield marks
+    finally:
+        implicit.solve_implicit, implicit.final_result = orig_solve, orig_final
+        if "start" in marks and "end" in marks:
+            marks["s"] = marks["end"] - marks["start"]
 
 
 def _problem(problem, n):
@@ -253,15 +292,16 @@ def main(argv=None):
             print(f"[scaling] {problem} n={n}: {r.get('status')} {r.get('solve_s', float('nan')):.3f} s",
                   file=sys.stderr)
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores (one used)")
-    print(f"{'problem':<14} {'n':>7} {'iter':>5} {'solve s':>9} {'s/iter':>9} {'/dgbsv':>7} {'residual':>9} "
+    print(f"{'problem':<14} {'n':>7} {'iter':>5} {'solve s':>9} {'s/iter':>9} {'/dgbsv':>7} {'cpu':>5} {'residual':>9} "
           f"{'floor':>8} {'noise':>8} {'noise|x|':>8} {'error':>9} {'setup s':>8} {'RSS MB':>8} {'numpy MB':>9}  status")
     for r in rows:
         if "solve_s" not in r:
             print(f"{r['problem']:<14} {r['n']:>7}  {r['status']}: {r['message']}")
             continue
         print(f"{r['problem']:<14} {r['n']:>7} {r['iterations']:>5} {r['solve_s']:>9.3f} {r['s_per_iteration']:>9.4f} "
-              f"{r['per_iteration_ratio_to_dgbsv']:>7.2f} {r['residual']:>9.1e} {r['residual_floor']:>8.1e} "
-              f"{r['noise_floor']:>8.1e} {r['noise_floor_absolute']:>8.1e} {r['error']:>9.1e} {r['setup_s']:>8.3f} {r['rss_growth_mb']:>8.1f} {r['traced_peak_mb']:>9.1f}  "
+              f"{r['per_iteration_ratio_to_dgbsv']:>7.2f} {r['per_iteration_cpu_ratio_to_dgbsv']:>5.2f} {r['residual']:>9.1e} "
+              f"{r['residual_floor']:>8.1e} {r['noise_floor']:>8.1e} {r['noise_floor_absolute']:>8.1e} {r['error']:>9.1e} "
+              f"{r['setup_s']:>8.3f} {r['rss_growth_mb']:>8.1f} {r['traced_peak_mb']:>9.1f}  "
               f"{r['status']}")
     fits = {}
     for problem in args.problems:
@@ -299,7 +339,8 @@ def million(args):
               f"(tol {r['tol']:.0e}, floor {r['residual_floor']:.1e}), error {r['error']:.2e}")
         print(f"  setup {r['setup_s']:.2f} s; solve {r['solve_s']:.2f} s = assembly {r['assembly_s']:.2f} + "
               f"factorisation {r['factorisation_s']:.2f} + line search {r['line_search_s']:.2f} + other {other:.2f}; "
-              f"one dgbsv {r['dgbsv_s']:.3f} s, per iteration {r['per_iteration_ratio_to_dgbsv']:.2f} x dgbsv")
+              f"one dgbsv {r['dgbsv_s']:.3f} s, per iteration {r['per_iteration_ratio_to_dgbsv']:.2f} x dgbsv "
+              f"({r['per_iteration_cpu_ratio_to_dgbsv']:.2f} x in CPU time)")
         print(f"  CPU time of the solve: user {r['solve_cpu_user_s']:.2f} s, system {r['solve_cpu_system_s']:.2f} s "
               f"(system time: page faults, the first touch of the band's pages and of temporaries)")
         print(f"  peak RSS {r['peak_rss_mb']:.0f} MB (growth over the compiled process {r['rss_growth_mb']:.0f} MB, "

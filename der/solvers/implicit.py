@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from ..geometry import add_compensated
-from ..linalg import add_diagonal, band_solve, band_to_coo, constrain_band
+from ..linalg import add_diagonal, band_solve, band_to_coo, constrain_band, dot, dot_abs
 from .system import (
     FLOOR_FACTOR, INTERRUPTS, constrain_system, constraint_residual, energy_terms, evaluate_system, expand,
     final_result, floor_forces, floor_verdict, is_interrupt, load_scales, max_strain, multiplier_update,
@@ -43,6 +43,9 @@ FLOOR_STALL_ITERATIONS = 2      # enough once the residual is down at the round-
 # pseudo-time step reductions (x0.1 each) before a step is declared impossible: enough to go from Newton's
 # method (dt up to 1e30) down to a step that only damps (dt ~ 1e-10); 12 near the round-off floor
 MAX_SHRINKS = 40
+# the band path factorises the Jacobian in place (False: copy it before each attempt, as the contact path does;
+# kept for the test that both end bitwise the same)
+IN_PLACE = True
 
 
 def shrink(dt, options):
@@ -92,9 +95,15 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     just_updated = False
     descent = total_descent = noise = 0.0
     potential = potential_best = 0.0     # E - work of the loads, from the start of this loop
-    ab_K = np.empty_like(system.ab)
     timings = {"assembly": 0.0, "factorisation": 0.0, "line_search": 0.0}   # seconds of wall_time by phase
-    work = np.empty_like(system.ab)
+    # band path: the Jacobian is factorised in place in system.ab (no copy of the band per iteration; a retried
+    # step assembles it again, bitwise the same). With contact terms the band is copied as before: their
+    # evaluation is not repeated, and their sparse path does not factorise the band (issue 17)
+    ab_K = work = None
+    n_dof = system.ab.shape[1]
+    fext = np.empty(n_dof)          # the loads at ``state`` (the line search's evaluations overwrite system.fext)
+    q_trial = np.empty(n_dof)
+    step = np.empty(n_dof)
     exact_contact = False        # contact: exact (unprojected) barrier Hessian in Newton's end game
     try:
         while True:
@@ -159,20 +168,32 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 status, message = "time_budget", f"time budget of {options.time_budget:g} s used up"
                 break
             it += 1
-            ab_K[:] = system.ab
-            diag = np.abs(ab_K[kl + ku, :][perm])
+            in_place = IN_PLACE and not system.terms
+            if not in_place:
+                if ab_K is None:
+                    ab_K, work = np.empty_like(system.ab), np.empty_like(system.ab)
+                ab_K[:] = system.ab
+            diag = np.abs(system.ab[kl + ku, :][perm])
             coo = system.contact_coo            # off-band contact Hessian triplets (empty: banded path)
             if coo:
                 diag += _coo_diagonal(coo, diag.size)
             diag[diag == 0] = 1.0
-            fext = system.fext.copy()
+            fext[:] = system.fext
             round_off = floor_forces(system, state)
             accepted = False
             for _attempt in range(MAX_SHRINKS):
+                if in_place and _attempt > 0:
+                    # the LU factors of the last attempt overwrote the Jacobian: assemble it again
+                    t_phase = time.perf_counter()
+                    evaluate_system(system, state, 2)
+                    timings["assembly"] += time.perf_counter() - t_phase
                 if _attempt == 12 and residual < 100.0 * residual_floor(system, state, scales):
                     break   # near the round-off floor a step that lowers the energy may not exist
                 t_phase = time.perf_counter()
-                work[:] = ab_K
+                if in_place:
+                    work = system.ab
+                else:
+                    work[:] = ab_K
                 add_diagonal(work, kl, ku, perm, diag, 1.0 / dt)
                 constrain_system(system, work, 1.0)     # T^T (K + D/dt) T: the end supports' free variables
                 if coo:
@@ -183,7 +204,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 expand(system, delta)
                 timings["factorisation"] += time.perf_counter() - t_phase
                 with np.errstate(over="ignore", invalid="ignore"):   # a huge step is refused just below
-                    slope = float(R @ delta)
+                    slope = dot(R, delta)
                 if info != 0 or not np.all(np.isfinite(delta)) or slope <= 0:
                     if exact_contact:
                         break         # the exact contact Hessian is indefinite here: back to the projected one
@@ -204,10 +225,12 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                         add_compensated(state.q, state.q_lo, a, delta, trial.q, trial.q_lo)
                         q_new = trial.q
                     else:       # a state without low parts (prepared elsewhere): plain coordinates
-                        q_new = state.q + a * delta
+                        np.multiply(delta, a, out=q_trial)
+                        q_trial += state.q
+                        q_new = q_trial
                     if transport(system, state, q_new, trial):
                         e_trial = evaluate_system(system, trial, 0)
-                        merit = e_trial - energy - a * float(fext @ delta)
+                        merit = e_trial - energy - a * dot(fext, delta)
                         slack = 1e-13 * (abs(energy) + abs(e_trial)) + 1e-300
                         if np.isfinite(e_trial) and merit <= -options.armijo * a * slope + slack:
                             accepted = True
@@ -231,11 +254,11 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 break
             # the progress measure uses the step actually taken (q + a delta rounded), not a delta: at the floor a
             # step can round back and forth between two states and credit the load work a fext.delta each time
-            step = trial.q - state.q
-            change = e_trial - energy - float(fext @ step)
+            np.subtract(trial.q, state.q, out=step)
+            change = e_trial - energy - dot(fext, step)
             potential += change
             descent = max(-change, 0.0)
-            noise = float(round_off @ np.abs(step))
+            noise = dot_abs(round_off, step)
             state.copy_from(trial)
             total_descent += descent
             if system.contact_coo and a == 1.0 and dt >= options.dt_max and residual < EXACT_CONTACT_BELOW:

@@ -828,8 +828,8 @@ def _rotation_is_free(system, state, fixed, a):
     supports = [c for c in system.scene.constraints if isinstance(c, END_SUPPORTS)]
     held = fixed.copy()
     held[system.links.dep] = False
-    pinned = [k for k in range(rod.n_nodes) if held[4 * k:4 * k + 3].all()]
-    if len(supports) == 1 and not pinned:
+    pinned = np.flatnonzero(held.reshape(-1, 4)[:, :3].all(axis=1))   # (no Python loop over nodes: issue 17)
+    if len(supports) == 1 and pinned.size == 0:
         centre = end_centre(x, rod, supports[0].end)
     else:
         centre = x[pinned[0]] if len(pinned) == 1 else x.mean(axis=0)

@@ -21,7 +21,6 @@ dissipation) with, for quasi-static ones, mass-proportional damping at twice the
 crossing, capstan and pile are reported unsupported.
 """
 import math
-import time
 
 import numpy as np
 
@@ -104,7 +103,6 @@ class DerSolver:
         inertia = math.pi * rod.radius ** 4 / 4.0
         L = rod.length
         n = n_elements + 1
-        h = L / n_elements
         points = np.asarray(rod.centerline, float)
         chord = points[-1] - points[0]
         if np.linalg.norm(chord) < 1e-9 * L:

@@ -170,6 +170,18 @@ def check_parameters(parameters, p):
             spec[4].check(spec[0], getattr(p, spec[0].replace("-", "_")), p)
 
 
+def check_contact_resolution(p):
+    """ValueError unless a contact scenario's rod resolves its radius: ``p.radius`` well below ``p.L`` (r < L/20),
+    edges no longer than 2r (``p.L / p.n``), and ``p.perturb`` in [0, 0.1) (plectoneme, greenhill)."""
+    if p.radius >= 0.05 * p.L:
+        raise ValueError(f"--radius must be well below L (r < L/20); got r = {p.radius}, L = {p.L}")
+    if p.L / p.n > 2 * p.radius:
+        raise ValueError(f"--n {p.n} is too coarse for the contact: edge length {p.L / p.n:.3g} > 2r = "
+                         f"{2 * p.radius:.3g} (use --n >= {int(np.ceil(p.L / (2 * p.radius)))})")
+    if not 0 <= p.perturb < 0.1:
+        raise ValueError(f"--perturb must lie in [0, 0.1); got {p.perturb}")
+
+
 def validator(parameters, extra=None):
     """A scenario's ``run.validate``: the declared ranges, then ``extra(p)`` for what they cannot say."""
     def validate(p):

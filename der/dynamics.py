@@ -50,7 +50,7 @@ import dataclasses
 import math
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -1052,7 +1052,6 @@ class _VerletRun(_Run):
         _zero_fixed(ab, sysm)
         m = sysm.mass.copy()
         bound = float(_gershgorin(ab, sysm.kl, sysm.ku, sysm.perm, m))
-        d = self.model.damping
         if bound <= 0:
             return math.inf
         return 2.0 / math.sqrt(bound)

@@ -30,7 +30,7 @@ import numpy as np
 
 import der
 from der import diagnostics as dg
-from der.cli import scenario_main
+from der.cli import check_contact_resolution, scenario_main
 
 PARAMETERS = [
     ("A1", 1.0, float, "bending stiffness"),
@@ -122,7 +122,6 @@ def summarise(p, steps, Nc):
     out["converged"] = all(s["converged"] for s in steps) and len(steps) == p.sweep
     lk_err = np.abs(np.array(out["linking_number"]) - N)
     out["lk_error_max"] = float(lk_err.max()) if lk_err.size else None
-    straight = [k for k, s in enumerate(steps) if s["lateral"] < STRAIGHT * p.L]
     bent = [k for k, s in enumerate(steps) if s["lateral"] >= STRAIGHT * p.L]
     out["buckling_turns"] = float(N[bent[0] - 1]) if bent and bent[0] > 0 else None
     touching = [k for k, s in enumerate(steps) if s["contacts"] > 0]
@@ -165,13 +164,7 @@ def validate(p):
     if p.force == 0 and step_turns > 0.125:
         raise ValueError(f"--sweep {p.sweep} is too coarse for --over {p.over}: {step_turns:.3g} turns per step, at "
                          f"most 1/8 (--sweep >= {int(np.ceil(p.over * 1.4303 * p.A1 / p.A2 / 0.125))})")
-    if p.radius >= 0.05 * p.L:
-        raise ValueError(f"--radius must be well below L (r < L/20); got r = {p.radius}, L = {p.L}")
-    if p.L / p.n > 2 * p.radius:
-        raise ValueError(f"--n {p.n} is too coarse for the contact: edge length {p.L / p.n:.3g} > 2r = "
-                         f"{2 * p.radius:.3g} (use --n >= {int(np.ceil(p.L / (2 * p.radius)))})")
-    if not 0 <= p.perturb < 0.1:
-        raise ValueError(f"--perturb must lie in [0, 0.1); got {p.perturb}")
+    check_contact_resolution(p)
 
 
 run.validate = validate

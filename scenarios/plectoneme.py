@@ -31,7 +31,7 @@ from scipy.optimize import brentq, minimize_scalar
 
 import der
 from der import diagnostics as dg
-from der.cli import scenario_main
+from der.cli import check_contact_resolution, scenario_main
 
 PARAMETERS = [
     ("A1", 1.0, float, "bending stiffness"),
@@ -241,13 +241,7 @@ def validate(p):
     if p.turns / p.sweep > 0.25:
         raise ValueError(f"--sweep {p.sweep} is too coarse for --turns {p.turns}: at most 1/4 turn per step "
                          f"(--sweep >= {int(np.ceil(4 * p.turns))})")
-    if p.radius >= 0.05 * p.L:
-        raise ValueError(f"--radius must be well below L (r < L/20); got r = {p.radius}, L = {p.L}")
-    if p.L / p.n > 2 * p.radius:
-        raise ValueError(f"--n {p.n} is too coarse for the contact: edge length {p.L / p.n:.3g} > 2r = "
-                         f"{2 * p.radius:.3g} (use --n >= {int(np.ceil(p.L / (2 * p.radius)))})")
-    if not 0 <= p.perturb < 0.1:
-        raise ValueError(f"--perturb must lie in [0, 0.1); got {p.perturb}")
+    check_contact_resolution(p)
 
 
 run.validate = validate

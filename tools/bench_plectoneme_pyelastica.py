@@ -146,7 +146,6 @@ def _rotation_angle_about(Qa, Qb):
 
 def end_quantities(x, frames):
     """x (n_nodes, 3) centreline, frames (n_edges, 3, 3) rows d1, d2, d3 (d3 along the edge). Axis y."""
-    from der import diagnostics as dg
     from der.contact import topology, exclusion_k  # noqa: F401
     from scenarios.plectoneme import closed_writhe
 

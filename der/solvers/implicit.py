@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from ..geometry import add_compensated
-from ..linalg import add_diagonal, band_solve, band_to_coo, constrain_band, dot, dot_abs
+from ..linalg import add_diagonal, band_solve, band_to_coo, dot, dot_abs
 from .system import (
     FLOOR_FACTOR, INTERRUPTS, constrain_system, constraint_residual, energy_terms, evaluate_system, expand,
     final_result, floor_forces, floor_verdict, is_interrupt, load_scales, max_strain, multiplier_update,

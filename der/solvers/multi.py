@@ -171,17 +171,12 @@ def prepare_multi_state(system, state):
 # ---- the rod-dependent functions of system.py, for a MultiSystem ----
 
 def evaluate_system(system, state, order):
-    from .system import evaluate_system as one
+    from .system import add_terms, evaluate_system as one
 
     energy = 0.0
     for p, s in system.views(state):
         energy += one(p, s, order)
-    if system.terms:
-        if order >= 2:
-            system.contact_coo = []
-        for term in system.terms:
-            energy += term.evaluate(state, order, system.grad, system.ab, system.contact_coo)
-    return energy
+    return energy + add_terms(system, state, order)
 
 
 def rod_scales(system, state):

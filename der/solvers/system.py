@@ -251,6 +251,14 @@ def evaluate_system(system, state, order):
         return multi.evaluate_system(system, state, order)
     energy = evaluate(system.plan, state.q, state.d1, state.reference_twist, state.lam, order, system.grad,
                       system.fext, system.ab, system.kl, system.ku, system.perm, state.q_lo)
+    return energy + add_terms(system, state, order)
+
+
+def add_terms(system, state, order):
+    """The scene's contact terms at ``state``: their energy (returned), gradient into ``system.grad`` and, with
+    order 2, band-local Hessian blocks into ``system.ab`` and off-band triplets into a fresh ``system.contact_coo``
+    (one rod or several: the terms see the whole scene)."""
+    energy = 0.0
     if system.terms:
         if order >= 2:
             system.contact_coo = []
@@ -629,7 +637,6 @@ def multiplier_update(system, state, previous=None):
         from . import multi
 
         return multi.multiplier_update(system, state, previous)
-    rod = system.rod
     g = state_elongations(system, state)
     k = system.plan.k_stretch
     if previous is not None:

@@ -335,7 +335,7 @@ class BoundSelfContact(BoundBarrier):
         topo, S = self.topo, self.S
         if order == 0:
             e, *_ = S.sampled_system(pos, topo.edges, pairs, topo.edge_radius, self.edge_len, self.owns_end,
-                                     self.samples, self.dhat, self.kappa, 0, True, self.node_dof, grad,
+                                     self.samples, self.dhat, self.kappa, 0, True, self.node_dof, np.empty(0),
                                      np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0))
             return float(e)
         act = S.sampled_active_pairs(pos, topo.edges, pairs, topo.edge_radius, self.edge_len, self.owns_end,

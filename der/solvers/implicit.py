@@ -33,19 +33,12 @@ from .system import (
 )
 
 STALL_ITERATIONS = 6
-import os as _os
-_DEBUG = bool(_os.environ.get("DER_DEBUG_CONTACT"))
 # contact: below this residual, after a full Newton step, the barrier Hessian is used unprojected
 EXACT_CONTACT_BELOW = 1e-4
 # contact: the Newton matrix reordered by reverse Cuthill-McKee and factorised as a band (der/contact/reorder.py)
 # while its bandwidth kl + ku stays at most this (measured: LAPACK's banded LU beats splu up to about 2 x 60)
 BANDED_CONTACT = True
 BANDED_CONTACT_MAX_WIDTH = 120
-# contact: a term with a ``trust_radius`` (a length) limits the largest nodal displacement of a Newton step to it by
-# damping (D / dt), from this pseudo-time step down, instead of cutting the step: a plectoneme has collective modes
-# (the strands sliding along each other) whose stiffness is ~1e-11 of the largest, so the undamped Newton step moves
-# them far beyond where the contact's quadratic model holds, and the stiff modes never converge (docs/contact.md 9)
-TRUST_DT = 1e8
 FLOOR_STALL_ITERATIONS = 2      # enough once the residual is down at the round-off floor
 # pseudo-time step reductions (x0.1 each) before a step is declared impossible: enough to go from Newton's
 # method (dt up to 1e30) down to a step that only damps (dt ~ 1e-10); 12 near the round-off floor
@@ -116,8 +109,6 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     exact_below = max([getattr(t, "exact_hessian_below", EXACT_CONTACT_BELOW) for t in system.terms],
                       default=EXACT_CONTACT_BELOW)
     exact_contact = exact_below == np.inf
-    trust_radius = min([getattr(t, "trust_radius", np.inf) for t in system.terms], default=np.inf)
-    trust_radius = None if trust_radius == np.inf else trust_radius
     try:
         while True:
             for t in system.terms:
@@ -189,7 +180,9 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
             diag = np.abs(system.ab[kl + ku, :][perm])
             coo = system.contact_coo            # off-band contact Hessian triplets (empty: banded path)
             if coo:
-                diag += np.maximum(_coo_diagonal(coo, diag.size), 0.0)   # (the exact contact Hessian may have negative entries)
+                cd = _coo_diagonal(coo, diag.size)
+                # (a smooth term's exact Hessian may have negative diagonal entries: no anti-damping)
+                diag += np.maximum(cd, 0.0) if exact_below == np.inf else cd
             diag[diag == 0] = 1.0
             fext[:] = system.fext
             round_off = floor_forces(system, state)
@@ -223,13 +216,6 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                         break         # the exact contact Hessian is indefinite here: back to the projected one
                     dt = shrink(dt, options)
                     continue
-                if trust_radius is not None and _attempt + 1 < MAX_SHRINKS:
-                    # contact: a trust region on the nodes' displacement (see TRUST_DT). A longer step is not cut
-                    # (that would also cut the stiff modes' Newton step) but damped, by a smaller pseudo-time step
-                    move = float(np.abs(delta.reshape(-1, 4)[:, :3]).max())
-                    if move > trust_radius:
-                        dt = TRUST_DT if dt >= options.dt_max else dt * 0.1
-                        continue
                 a = 1.0
                 if system.terms:
                     # contact: start at the CCD-safe fraction, so that no strand passes through another (or
@@ -280,9 +266,6 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
             descent = max(-change, 0.0)
             noise = dot_abs(round_off, step)
             state.copy_from(trial)
-            if _DEBUG:
-                print(f"DBG it={it} res={residual:.2e} move={a * float(np.abs(delta.reshape(-1, 4)[:, :3]).max()):.2e} att={_attempt} a={a:.3g} a0={a_start:.3g} dt={dt:.1e} exact={exact_contact} "
-                      f"kappa={[getattr(t, 'kappa', 0) for t in system.terms]} gap={[getattr(t, 'min_gap', 0) for t in system.terms]} nact={[getattr(t, 'n_active', 0) for t in system.terms]}")
             total_descent += descent
             if system.contact_coo and a == 1.0 and dt >= options.dt_max and residual < exact_below:
                 exact_contact = True

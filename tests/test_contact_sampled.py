@@ -113,3 +113,25 @@ def test_self_contact_samples_bad_input():
     scene = der.Scene(rod, constraints=[der.clamp("start")], contacts=[der.self_contact(0.01, samples=2)])
     with pytest.raises(ValueError, match="explicit"):
         der.solve(scene, solver="explicit")
+
+
+def test_sampled_self_contact_supercoiled_ring_keeps_lk_and_the_distance():
+    """The naturally straight ring twisted to twice Michell's threshold (as tests/test_explicit_contact.py), solved
+    with the sampled barrier: it writhes into self-contact without passage (Lk = twist / 2 pi), its centrelines
+    stay more than 2r apart, and its writhe and energies are those of the segment barrier's equilibrium to within
+    the models' difference (the sampled offset exceeds 2r by at most (l_a^2 + l_b^2) / (8 r) ~ 0.004 here)."""
+    import der
+    from der import diagnostics as dg
+
+    from test_explicit_contact import R, _twisted_ring
+
+    rod, twist, start = _twisted_ring()
+    seg = der.solve(der.Scene(rod, contacts=[der.self_contact(R)]), state=start, stability=False, tol=1e-8)
+    smp = der.solve(der.Scene(rod, contacts=[der.self_contact(R, samples=4)]), state=start, stability=False,
+                    tol=1e-8)
+    assert seg.converged and smp.converged
+    lk, _, wr = dg.linking_number(rod, smp.state)
+    assert lk == pytest.approx(twist / (2 * np.pi), abs=1e-6)
+    assert smp.contact["n_contacts"] > 0 and smp.contact["min_distance"] > 2 * R
+    assert wr == pytest.approx(dg.linking_number(rod, seg.state)[2], abs=0.05)
+    assert smp.energy["bend"] == pytest.approx(seg.energy["bend"], rel=0.05)

@@ -44,6 +44,8 @@ PARAMETERS = [
     ("turns", 6.0, float, "number of turns N at the end of the continuation"),
     ("sweep", 48, int, "continuation steps from 0 to --turns (at most 1/4 turn each)"),
     ("perturb", 1e-3, float, "lateral imperfection (fraction of L) added to the start of every step before contact"),
+    ("samples", None, int, "contact barrier on m sample points per edge (der.self_contact(r, samples=m): smooth, "
+     "exact Newton; docs/contact.md section 9) instead of segment distances"),
     ("png", None, str, "write extension and torque against N to this PNG"),
 ]
 
@@ -121,7 +123,7 @@ def observe(rod, result, turns, p):
 
 def run(p, solver):
     rod = der.rod_from_shape(der.shapes.straight(p.L, p.n), p.A1, p.A2, EA=p.EA)
-    contact = der.self_contact(p.radius)
+    contact = der.self_contact(p.radius, samples=p.samples)
     turns = np.linspace(0.0, p.turns, p.sweep + 1)[1:]
     state = rod.rest_state()
     xi = rod.rest_q.reshape(-1, 4)[:, 2] / p.L

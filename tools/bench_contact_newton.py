@@ -6,8 +6,10 @@
 Configuration: the plectoneme of scenarios/plectoneme.py (L = 20, A1 = 1, A2 = 1/0.67, EA = 1e5, r = 0.05,
 F = 1, clamped bottom, top turned and sliding) at 5 turns, a converged state at n = 400 (``--state``, a pickle
 (scene, state) written by scenarios/plectoneme.py's continuation; without it the continuation is run here first),
-resampled along its arc length to n edges and widened across the axis by the least of 2, 5, 10, 20, 40 % that
-keeps its strands more than 2r apart (coarse polygons cut the corners of the helices). Each n: der.solve from that start with max_iterations = --iterations, with self-contact
+resampled along its arc length to n edges by a cubic spline through its nodes (continuous curvature, so that a
+fine resampling does not bend tighter than r at the coarse polygon's corners, as linear interpolation did at
+n = 10,000) and widened across the axis by the least of 2, 5, 10, 20, 40 % that keeps its strands more than 2r
+apart. ``--samples m``: the contact term with m sample points per edge (der.self_contact(r, samples=m)). Each n: der.solve from that start with max_iterations = --iterations, with self-contact
 (the sparse path: RCM + banded LU, or splu) and, for the same start and the same iterations, without it (the
 banded path); time per iteration = (wall time of a solve of 2 + --iterations iterations minus that of 2) /
 --iterations, the median of --repeat; memory = tracemalloc's
@@ -55,11 +57,16 @@ WIDEN = (1.02, 1.05, 1.1, 1.2, 1.4)
 
 
 def resample(x, n, widen):
+    from scipy.interpolate import CubicSpline
+
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(x, axis=0), axis=1))])
     t = np.linspace(0.0, s[-1], n + 1)
-    y = np.stack([np.interp(t, s, x[:, d]) for d in range(3)], axis=1)
+    y = CubicSpline(s, x, axis=0)(t)
     y[:, :2] *= widen
     return y
+
+
+SAMPLES = None     # --samples
 
 
 def one(n, x400, iterations, contact):
@@ -76,7 +83,7 @@ def _solve(n, x400, iterations, contact):
     rod = der.rod_from_shape(der.shapes.straight(L, n), A1, A2, EA=EA)
     scene = der.Scene(rod, loads=[der.end_force([0.0, 0.0, F])],
                       constraints=[der.clamp("start"), der.clamp("end", rotation=rotation_z(2 * np.pi * 5.0), slide=2)],
-                      contacts=[der.self_contact(R)] if contact else [])
+                      contacts=[der.self_contact(R, samples=SAMPLES)] if contact else [])
     from der.contact.samples import min_distance
     from der.contact import topology, candidate_pairs, exclusion_k
 
@@ -105,8 +112,11 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--state", default=None)
     ap.add_argument("--splu", action="store_true", help="the contact path with splu (COLAMD) only, as before RCM")
+    ap.add_argument("--samples", type=int, default=None, help="sample points per edge of the contact barrier")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
+    global SAMPLES
+    SAMPLES = args.samples
     if args.splu:
         import der.solvers.implicit as implicit
 
@@ -143,7 +153,7 @@ def main(argv=None):
     rows = [r for r in rows if "refused" not in r]
     ns = np.array([r["n"] for r in rows], float)
     fit = lambda k: float(np.polyfit(np.log(ns), np.log([r[k] for r in rows]), 1)[0]) if len(rows) > 1 else None  # noqa
-    out = {"tool": "bench_contact_newton", "splu": args.splu, "rows": rows, "refused": refused, "exponent_time": fit("contact_s_per_iteration"),
+    out = {"tool": "bench_contact_newton", "splu": args.splu, "samples": args.samples, "rows": rows, "refused": refused, "exponent_time": fit("contact_s_per_iteration"),
            "exponent_time_band": fit("band_s_per_iteration"),
            "exponent_linear_solve": fit("contact_s_per_linear_solve"), "exponent_memory": fit("peak_bytes")}
     if args.json:

@@ -104,7 +104,11 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     fext = np.empty(n_dof)          # the loads at ``state`` (the line search's evaluations overwrite system.fext)
     q_trial = np.empty(n_dof)
     step = np.empty(n_dof)
-    exact_contact = False        # contact: exact (unprojected) barrier Hessian in Newton's end game
+    # contact: exact (unprojected) barrier Hessian in Newton's end game: below a residual the terms set (a smooth
+    # barrier, der/contact/sampled.py, sets infinity: exact from the start, the projected one only as a fallback)
+    exact_below = max([getattr(t, "exact_hessian_below", EXACT_CONTACT_BELOW) for t in system.terms],
+                      default=EXACT_CONTACT_BELOW)
+    exact_contact = exact_below == np.inf
     try:
         while True:
             for t in system.terms:
@@ -176,7 +180,9 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
             diag = np.abs(system.ab[kl + ku, :][perm])
             coo = system.contact_coo            # off-band contact Hessian triplets (empty: banded path)
             if coo:
-                diag += _coo_diagonal(coo, diag.size)
+                cd = _coo_diagonal(coo, diag.size)
+                # (a smooth term's exact Hessian may have negative diagonal entries: no anti-damping)
+                diag += np.maximum(cd, 0.0) if exact_below == np.inf else cd
             diag[diag == 0] = 1.0
             fext[:] = system.fext
             round_off = floor_forces(system, state)
@@ -261,7 +267,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
             noise = dot_abs(round_off, step)
             state.copy_from(trial)
             total_descent += descent
-            if system.contact_coo and a == 1.0 and dt >= options.dt_max and residual < EXACT_CONTACT_BELOW:
+            if system.contact_coo and a == 1.0 and dt >= options.dt_max and residual < exact_below:
                 exact_contact = True
             # trust the pseudo-time step more after a full step, less after a backtrack
             # (a step cut by the CCD bound alone, a == a_start < 1, is a full step of the linearised model)

@@ -69,8 +69,13 @@ class SelfContact:
     radius: float
     dhat: float | None = None
     kappa: float | None = None
+    samples: int | None = None
     constructor = "self_contact(radius)"
-    explicit_ok = True          # the explicit solver handles it (der/solvers/explicit_contact.py)
+
+    @property
+    def explicit_ok(self):
+        """The explicit solver handles the segment barrier (der/solvers/explicit_contact.py), not the sampled one."""
+        return self.samples is None
 
     def check_scene(self, scene):
         curvature_radius_check(scene.rod, None, self.radius, "der.self_contact")
@@ -88,7 +93,7 @@ class SelfContact:
         return BoundSelfContact(self, system)
 
 
-def self_contact(radius, dhat=None, kappa=None):
+def self_contact(radius, dhat=None, kappa=None, samples=None):
     """Self-contact of a rod of radius ``radius`` (length): non-neighbouring edges stay more than 2r apart
     (centreline distance) and never pass through each other, also within a solver step.
 
@@ -101,6 +106,13 @@ def self_contact(radius, dhat=None, kappa=None):
         surfaces are closer than dhat, and the equilibrium gap of a loaded contact lies in (0, dhat).
     kappa : float > 0, optional
         Barrier stiffness (energy / length^2). Default: adaptive (docs/contact.md section 6).
+
+    samples : int >= 1, optional
+        None (default): the barrier acts on the segment-segment distances of edge pairs (IPC). An integer m: on
+        the distances between m points per edge (nodes included), offset so that the centrelines stay more than
+        2r apart (der/contact/sampled.py). That distance is smooth, so Newton's method with the exact barrier
+        Hessian converges quadratically on line contacts (plectonemes), where the segment distance's region
+        switches make it linear (docs/contact.md section 9). Implicit solver only.
 
     Neighbours along the rod within an arc pi r + dhat are not contact partners (a rod bent to a radius of
     curvature near r would otherwise touch itself on the inside of the bend).
@@ -118,7 +130,12 @@ def self_contact(radius, dhat=None, kappa=None):
         kappa = validate.finite_number(kappa, "der.self_contact: kappa")
         if not kappa > 0:
             raise ValueError(f"der.self_contact: kappa must be > 0 (or None: adaptive); got {kappa!r}")
-    return SelfContact(radius, dhat, kappa)
+    if samples is not None:
+        if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or not 1 <= samples <= 64:
+            raise ValueError(f"der.self_contact: samples must be None (segment distances) or an integer in [1, 64] "
+                             f"(sample points per edge); got {samples!r}")
+        samples = int(samples)
+    return SelfContact(radius, dhat, kappa, samples)
 
 
 class BoundBarrier:
@@ -187,6 +204,28 @@ class BoundBarrier:
 
 class BoundSelfContact(BoundBarrier):
     couples_dofs = True
+    samples = None            # sample points per edge (der/contact/sampled.py), None: segment distances
+    pair_range_extra = 0.0    # the broad phase lists edge pairs within dhat + this
+
+    def _init_samples(self, m, rods):
+        """The sampled barrier's data (m points per edge): rest edge lengths, which edges carry their rod's end
+        node, and the broad phase's extra range (the largest sample offset beyond r_a + r_b)."""
+        self.samples = m
+        if m is None:
+            return
+        from ..contact import sampled
+
+        self.S = sampled
+        self.edge_len = np.ascontiguousarray(np.concatenate([np.asarray(r.l_bar, float) for r in rods]))
+        owns = []
+        for r in rods:
+            o = np.zeros(r.n_edges, dtype=np.int64)
+            if not r.closed:
+                o[-1] = 1
+            owns.append(o)
+        self.owns_end = np.concatenate(owns)
+        self.pair_range_extra = float(sampled.max_offset_excess(self.topo.edge_radius, self.edge_len, m))
+        self.exact_hessian_below = np.inf    # smooth: Newton with the exact Hessian, projected only as a fallback
 
     def __init__(self, term, system):
         from .. import contact as C
@@ -210,6 +249,7 @@ class BoundSelfContact(BoundBarrier):
         self.margin = VERLET_MARGIN * self.radius
         self._list = None            # (positions where built, pairs within dhat + margin)
         self.broad_phases = 0
+        self._init_samples(term.samples, [rod])
 
     def candidates(self, pos, pos1=None):
         """Pairs that may be within dhat at pos (and, with pos1, anywhere on the straight step pos -> pos1).
@@ -228,8 +268,8 @@ class BoundSelfContact(BoundBarrier):
         self.broad_phases += 1
         if pos1 is not None and np.sqrt(3.0) * float(np.abs(pos1 - pos).max()) > 0.5 * self.margin:
             # a long step: its swept boxes, not listed for reuse
-            return self.C.candidate_pairs(pos, self.topo, self.dhat, pos1=pos1)
-        pairs = self.C.candidate_pairs(pos, self.topo, self.dhat + self.margin)
+            return self.C.candidate_pairs(pos, self.topo, self.dhat + self.pair_range_extra, pos1=pos1)
+        pairs = self.C.candidate_pairs(pos, self.topo, self.dhat + self.pair_range_extra + self.margin)
         self._list = (pos.copy(), pairs)
         return pairs if pos1 is None else self.candidates(pos, pos1)
 
@@ -245,6 +285,15 @@ class BoundSelfContact(BoundBarrier):
                 raise ValueError(f"der.self_contact: the starting state violates the contact distance: edges {ea} and "
                                  f"{eb} are {gap[p] + 2 * self.radius:.6g} apart (centrelines), not more than 2r = "
                                  f"{2 * self.radius:.6g}")
+        if self.samples is not None:
+            near = self.C.candidate_pairs(pos, self.topo, self.pair_range_extra)
+            tau, k = self.S.sampled_ccd(pos, np.zeros_like(pos), self.topo.edges, near, self.topo.edge_radius,
+                                        self.edge_len, self.owns_end, self.samples, MIN_GAP_FRACTION)
+            if tau == 0.0:
+                ea, eb = (int(e) for e in near[k])
+                raise ValueError(f"der.self_contact: the starting state is too close for samples={self.samples}: edges "
+                                 f"{ea} and {eb} have sample points closer than their offset sqrt((2r)^2 + (l_a^2 + "
+                                 "l_b^2) / 4) (l = edge length / samples); use more samples or start farther apart")
 
     def _pair_data(self, pos, pairs):
         m = pairs.shape[0]
@@ -258,6 +307,8 @@ class BoundSelfContact(BoundBarrier):
         pos = self.positions(state)
         topo = self.topo
         pairs = self.candidates(pos)
+        if self.samples is not None:
+            return self._evaluate_sampled(pos, pairs, order, grad, coo)
         if order == 0:
             return float(self.A.pairs_energy(pos, topo.edges, pairs, topo.edge_radius, self.dhat, self.kappa))
         act = self.C.active_pairs(pos, topo.edges, pairs, topo.edge_radius, self.dhat)
@@ -280,12 +331,45 @@ class BoundSelfContact(BoundBarrier):
             coo.append((rows[:nt], cols[:nt], vals[:nt]))
         return float(energy)
 
+    def _evaluate_sampled(self, pos, pairs, order, grad, coo):
+        topo, S = self.topo, self.S
+        if order == 0:
+            e, *_ = S.sampled_system(pos, topo.edges, pairs, topo.edge_radius, self.edge_len, self.owns_end,
+                                     self.samples, self.dhat, self.kappa, 0, True, self.node_dof, np.empty(0),
+                                     np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0))
+            return float(e)
+        act = S.sampled_active_pairs(pos, topo.edges, pairs, topo.edge_radius, self.edge_len, self.owns_end,
+                                     self.samples, self.dhat)
+        self.n_active = act.shape[0]
+        if act.shape[0] == 0:
+            self.force_scale, self.min_gap = 0.0, np.inf
+            return 0.0
+        g = np.zeros(self.n_dof)
+        m = 144 * act.shape[0] if order >= 2 else 0
+        rows, cols, vals = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64), np.empty(m)
+        energy, n_active, nt, min_gap, _ = S.sampled_system(
+            pos, topo.edges, act, topo.edge_radius, self.edge_len, self.owns_end, self.samples, self.dhat,
+            self.kappa, min(order, 2), self.project, self.node_dof, g, rows, cols, vals)
+        self.min_gap = float(min_gap)
+        if not np.isfinite(energy):
+            return np.inf
+        grad += g
+        self.force_scale = float(np.linalg.norm(g.reshape(-1, 4)[:, :3], axis=1).max())
+        if order >= 2 and nt:
+            coo.append((rows[:nt], cols[:nt], vals[:nt]))
+        return float(energy)
+
     def max_step(self, state, delta):
         pos = self.positions(state)
         dpos = np.ascontiguousarray(delta.reshape(-1, 4)[:self.n_nodes, :3])
         pairs = self.candidates(pos, pos + dpos)
         tau, worst, _ = self.C.pairs_ccd(pos, dpos, self.topo.edges, pairs, self.topo.edge_radius, MIN_GAP_FRACTION,
                                          1e-6, 10000)
+        if self.samples is not None and tau > 0.0:
+            # the sampled barrier stays finite: every sample pair keeps 10 % of its gap as well
+            tau_s, _ = self.S.sampled_ccd(pos, dpos, self.topo.edges, pairs, self.topo.edge_radius, self.edge_len,
+                                          self.owns_end, self.samples, MIN_GAP_FRACTION)
+            tau = min(tau, tau_s)
         return float(tau)
 
     def diagnostics(self, state):
@@ -294,9 +378,16 @@ class BoundSelfContact(BoundBarrier):
         non-neighbour pairs (brute force up to 4000 edges, else over pairs within 4r)."""
         pos = self.positions(state)
         topo = self.topo
-        pairs = self.C.candidate_pairs(pos, topo, self.dhat)
+        pairs = self.C.candidate_pairs(pos, topo, self.dhat + self.pair_range_extra)
         gap, force, pa, pb = self._pair_data(pos, pairs)
-        keep = gap < self.dhat
+        if self.samples is not None:
+            # the sampled barrier: a pair is in contact when one of its sample pairs is within dhat of its offset,
+            # and its force is the sum of theirs
+            self.S.sampled_pair_forces(pos, topo.edges, pairs, topo.edge_radius, self.edge_len, self.owns_end,
+                                       self.samples, self.dhat, self.kappa, force)
+            keep = force > 0.0
+        else:
+            keep = gap < self.dhat
         pairs, gap, force, pa, pb = pairs[keep], gap[keep], force[keep], pa[keep], pb[keep]
         l_bar = self.rod.l_bar
         per_length = force / (0.5 * (l_bar[pairs[:, 0]] + l_bar[pairs[:, 1]])) if pairs.size else force

@@ -228,7 +228,8 @@ def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=
     bounds : (low, high): the branch ends where p would leave them (default: p0 and p_end, or unbounded).
     direction : +1 or -1, the initial sign of dp/ds (default: towards p_end, else +1).
     ds, ds_min, ds_max : arclength step (dimensionless, see the module docstring), adapted: halved on a failed
-        corrector, x1.5 after a corrector of at most 3 Newton iterations.
+        corrector, x1.5 after a corrector of at most 3 Newton iterations (natural method: after every converged
+        solve).
     p_scale : the parameter's unit in the arclength (default |p_end - p0|, else max(|p0|, 1)).
     max_steps, time_budget : bounds on the number of points and the seconds.
     method : "arclength" (default; passes folds) or "natural" (p steps, each a der.solve; stops at a fold).
@@ -898,7 +899,9 @@ def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_re
                 break
             if dp is not None:
                 dp = min(dp_max, 2.0 * dp)
-            elif iterations <= 3:
+            elif iterations <= 3 or natural:
+                # (a natural step is a der.solve, whose pseudo-time iterations count in the hundreds on a contact
+                # state: its convergence is the test; with "<= 3" a halved step never grew back)
                 ds = min(settings["ds_max"], ds * 1.5)
     except KeyboardInterrupt:
         status, message = "interrupted", "interrupted by the user; the points so far are kept"

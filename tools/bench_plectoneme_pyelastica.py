@@ -1,7 +1,12 @@
 """PyElastica's plectoneme example side by side with der (issue 14, scenario 4).
 
-    python tools/bench_plectoneme_pyelastica.py [--json] [--pyelastica-json FILE] [--der-only] [--final-time 100]
+    python tools/bench_plectoneme_pyelastica.py [--json] [--pyelastica-json FILE] [--der-only] [--sweep 40]
     /work/venv-bench/bin/python tools/bench_plectoneme_pyelastica.py --pyelastica-only --out FILE  (the long run)
+
+With --pyelastica-json FILE (the long run's --out): if FILE says "complete": true, the side-by-side table of the
+end quantities and the ratio PyElastica's wall time to t = 100 / der's wall time to its 10-turn equilibrium;
+otherwise (a snapshot of a run still going) its state labelled INCOMPLETE, beside der's step at the same turns,
+and no ratio.
 
 The rod and twist of PyElastica 1.0's self-contact plectoneme case (parameters in the issue's anchor; this is our
 own run of them, not PyElastica's example code): 150 elements, L = 1, r = 0.025, E = 1e6, G = E / 1.5, total
@@ -14,8 +19,16 @@ during the twisting").
 
 der: the same rod (A1 = E pi r^4 / 4, A2 = G pi r^4 / 2, EA = E pi r^2, extensible, n = 150 edges), the same
 supports (der.clamp at the start; der.clamp("end", rotation, slide=1): the end cross-section turned about y and
-free to slide along y, no force), self-contact of radius r, twisted by a continuation of --sweep steps to 10
-turns, each step a static equilibrium (the implicit solver). PyElastica resolves a damped dynamics in time; der
+free to slide along y, no force), self-contact of radius r, twisted by der.continuation (natural parameter,
+--sweep fixed steps to 10 turns, each a static equilibrium of the implicit solver, warm-started from the last).
+With F = 0 the rod folds into a plectoneme of its whole length whose writhe is capped near L sin 2 theta / (4 pi r)
+~ 3 turns: the rest stays twist, the torque M = 2 pi A2 Tw / L grows, and the end loop closes to a radius of
+curvature below r from N ~ 6.5 (Tw ~ 3.4). PyElastica's run bends the same way at the same twist (its tightest
+bend 0.999 r at Tw = 3.21, der's 1.029 r at Tw = 3.20; 0.956 r and 0.946 r at Tw = 3.97 and 4.05): the tight end
+loop is the thin-rod model's, in both codes (point contact, neighbours within pi r + dhat excluded), not an
+artefact. der's continuation steps therefore solve on with a TightBendWarning (a user's start so bent is still
+refused). Per step (--json, der.steps): Tw, Wr, extension, contacts, the tightest bend, and the tightest bend
+times M / A1 (not constant: 0.29 at N = 1.25 to 1.21 at N = 10, the loop is shaped by the strands' contact). PyElastica resolves a damped dynamics in time; der
 solves for equilibria, so the comparison is PyElastica's time to its final state against der's time to the
 equilibrium, both judged by the same end quantities computed by the same code here (one difference of setup:
 der's rod has its end cross-sections, the midpoints of its end edges, L apart, so its polygon is 150 L / 149 long

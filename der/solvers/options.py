@@ -137,7 +137,14 @@ class TightBendWarning(UserWarning):
     some vertex; ``SolverOptions(tight_bend="warn")``, as in ``der.continuation``'s steps). Neighbours within an
     arc pi r + dhat are not contact partners, so the barrier does not forbid such a bend: the rod model (a thin
     rod, a centreline) allows it, a real rod of radius r would crush its inside there. The message names the
-    vertex and its radius of curvature."""
+    vertex and its radius of curvature.
+
+    Example
+    -------
+    >>> import warnings, der
+    >>> options = der.SolverOptions(tight_bend="warn")      # what der.continuation's steps use
+    >>> # with warnings.catch_warnings(record=True) as w: der.solve(scene, state=state, options=options)
+    """
 
 
 class RoundoffFloorWarning(UserWarning):

@@ -308,6 +308,13 @@ class BoundSelfContact(BoundBarrier):
                                          1e-6, 10000)
         return float(tau)
 
+    def _min_curvature_radius(self, state):
+        """The tightest bend over the rods this term sees (one rod, or those of der.rod_contact)."""
+        rods = getattr(self, "rods", None)
+        if rods is None:
+            return min_curvature_radius(self.rod, state)[0]
+        return min(min_curvature_radius(r, s)[0] for r, s in zip(rods, getattr(state, "rods", [state])))
+
     def diagnostics(self, state):
         """Pairs in contact (gap < dhat), their gaps, forces (-kappa b'(gap), force units), forces per length
         (over the pair's mean rest edge length), contact points, and the smallest centreline distance over all
@@ -334,7 +341,7 @@ class BoundSelfContact(BoundBarrier):
             "force_per_length": per_length.tolist(), "total_force": float(force.sum()),
             "points": (0.5 * (pa + pb)).tolist(), "normals": _unit(pa - pb).tolist(),
             "min_distance": float(g_min + 2 * self.radius), "min_distance_edges": [int(ea), int(eb)],
-            "min_curvature_radius": min_curvature_radius(self.rod, state)[0],
+            "min_curvature_radius": self._min_curvature_radius(state),
         }
 
 

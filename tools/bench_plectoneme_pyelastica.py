@@ -394,7 +394,7 @@ def main(argv=None):
             k = int(np.argmin([abs(st["turns"] - pe["turns_applied"]) for st in d["steps"]]))
             st = d["steps"][k]
             print(f"(der at {st['turns']:g} turns, the step nearest PyElastica's snapshot: Tw {st['twist']:.4g}, Wr "
-                  f"{st['writhe']:.4g}, extension {st['extension']:.4g}, min curvature radius / r "
+                  f"{st['writhe']:.4g}, extension {st['extension']:.4g}, min curvature radius / r (rest Voronoi lengths) "
                   f"{st['min_curvature_radius'] / R:.4g}; PyElastica's is a damped dynamics still twisting)")
         if out["ratio_pyelastica_over_der"]:
             print(f"PyElastica wall time to t = 100 / der wall time to the 10-turn equilibrium: "

@@ -26,7 +26,8 @@ from .scene import Scene
 from .terms.contact import rod_contact, self_contact
 from .terms.obstacles import cylinder, plane, sphere
 from .solvers import (
-    ConvergenceError, LockedRodWarning, RoundoffFloorWarning, SolveResult, SolverOptions, check_stability, solve,
+    ConvergenceError, LockedRodWarning, RoundoffFloorWarning, SolveResult, SolverOptions, TightBendWarning,
+    check_stability, solve,
 )
 from .sweep import SweepResult, sweep
 from .warmup import warmup
@@ -36,7 +37,7 @@ from .dynamics import Damping, Trajectory, simulate
 __all__ = [
     "shapes", "sections", "diagnostics", "solve", "check_stability", "warmup", "SolverOptions", "SolveResult",
     "ConvergenceError",
-    "RoundoffFloorWarning", "LockedRodWarning", "Rod", "RodState", "rod", "rod_from_shape", "Scene",
+    "RoundoffFloorWarning", "LockedRodWarning", "TightBendWarning", "Rod", "RodState", "rod", "rod_from_shape", "Scene",
     "clamp", "hinge", "roller", "pin", "fix_theta", "point_force", "end_force", "distributed_force", "end_torque",
     "twisting_moment", "point_torque", "follower_force",
     "self_contact", "rod_contact", "plane", "sphere", "cylinder",

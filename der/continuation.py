@@ -27,17 +27,29 @@ branch along the critical eigenvector.
 
 Contact: while contact pairs are active the stiffness couples distant DOFs; each Newton step then factorises
 the constrained band plus the contact Hessian's triplets as one sparse matrix (SuperLU, as the implicit solver
-does), and K a = R, K b = R_p are solved with it (``Branch.sparse_factorisations`` counts them). The barrier
-keeps the strands apart as long as no Newton step jumps across it; a step that would (a non-finite energy)
-fails and is halved. Not handled: active contact on a rod whose end supports link DOFs (sliding clamps, pins).
+does), and K a = R, K b = R_p are solved with it (``Branch.sparse_factorisations`` counts them). On a rod whose
+end supports link DOFs (a sliding clamp, a pin: q_dep = c + T y) the triplets are condensed as the band is,
+T^T H T (``condensed_triplets``). The barrier keeps the strands apart as long as no Newton step jumps across it;
+a step that would (a non-finite energy) fails and is halved; the natural method's steps are der.solve's, whose
+line search is limited by CCD.
 
 Held DOFs (clamps, prescribed rotations) are put where scene_of(p)'s targets put them at every iterate, never
 extrapolated along a linear step: a clamp keeps its end edge's length, which a linear turn would stretch.
 
 ``method="natural"`` is the simpler natural-parameter continuation: p steps, each point a ``der.solve`` warm
-started from a secant predictor. It stops at a fold.
+started from a secant predictor (``predictor="last"``: from the last point, its held DOFs moved to the new
+targets). It stops at a fold. ``dp`` makes its steps a fixed parameter step (halved on a failed solve, grown back
+after a converged one, never above dp): a grid in p, with each point what ``der.solve`` finds from its warm start,
+snaps included (the tangent-continuity test, which halves adaptive steps whose secant turns by more than ~26
+degrees, does not apply). ``perturb(p, state)`` may add an imperfection to each step's start (e.g. while a rod is
+straight, so that it buckles past its threshold rather than staying on the unstable straight branch). Its steps
+after the first start from the model's own equilibria: a start bent tighter than a contact radius is solved on
+with a ``TightBendWarning`` (``SolverOptions.tight_bend = "warn"``); only the user's start is refused for it. A
+predicted start that violates a contact distance (a secant extrapolated into a contact) falls back to the last
+point's state.
 """
 import csv
+import dataclasses
 import io
 import json
 import math
@@ -49,6 +61,7 @@ import numpy as np
 from .scene import Scene
 
 METHODS = ("arclength", "natural")
+PREDICTORS = ("secant", "last")
 KINDS = ("fold", "bifurcation", "hopf")
 GAUGE_REGULARISATION = 1e-12   # times diag|K|, only when the rod has free rigid motions (they are projected out)
 GAUGE_TOL = 1e-6               # |K v| <= GAUGE_TOL |K| |v|: a rigid motion the stiffness annihilates
@@ -200,7 +213,8 @@ class Branch:
 def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=None, direction=None, ds=0.05,
                  ds_min=1e-6, ds_max=0.25, p_scale=None, max_steps=200, time_budget=math.inf, method="arclength",
                  summaries=None, stop=None, stability=True, locate=True, locate_tol=1e-7, n_eigenvalues=6,
-                 tol=1e-8, max_newton=12, keep_states=True, progress=None, options=None):
+                 tol=1e-8, max_newton=12, keep_states=True, progress=None, options=None, dp=None,
+                 predictor="secant", perturb=None, solve=None):
     """Follow an equilibrium of ``scene_of(p)`` as p changes, from ``p0``.
 
     Parameters
@@ -214,7 +228,8 @@ def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=
     bounds : (low, high): the branch ends where p would leave them (default: p0 and p_end, or unbounded).
     direction : +1 or -1, the initial sign of dp/ds (default: towards p_end, else +1).
     ds, ds_min, ds_max : arclength step (dimensionless, see the module docstring), adapted: halved on a failed
-        corrector, x1.5 after a corrector of at most 3 Newton iterations.
+        corrector, x1.5 after a corrector of at most 3 Newton iterations (natural method: after every converged
+        solve).
     p_scale : the parameter's unit in the arclength (default |p_end - p0|, else max(|p0|, 1)).
     max_steps, time_budget : bounds on the number of points and the seconds.
     method : "arclength" (default; passes folds) or "natural" (p steps, each a der.solve; stops at a fold).
@@ -226,7 +241,16 @@ def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=
         iterations per corrector.
     keep_states : keep every point's RodState (needed for ``record`` and ``switch``).
     progress : True: a line per point on stderr; None: after 2 s.
-    options : der.SolverOptions for the first solve and the natural method.
+    options : der.SolverOptions for the first solve and the natural method (whose steps after the first use it
+        with ``tight_bend="warn"``).
+    dp : natural method only: a fixed parameter step (> 0; its sign follows ``direction``), halved on a failed
+        solve (down to ds_min p_scale) and grown back after a converged one; None: arclength steps ``ds``.
+    predictor : natural method only: "secant" (default) or "last" (each solve starts from the last point).
+    perturb : natural method only: f(p, state) -> RodState or None, applied to each step's predicted start
+        (None: unchanged), e.g. an imperfection while the rod is straight.
+    solve : a function with der.solve's arguments (scene, state=, options=, tol=, stability=) returning its
+        SolveResult without raising when a solve does not converge, used for the first point and the natural
+        method's steps (e.g. a scenario's runner that records them); default der.solve.
 
     Returns
     -------
@@ -266,6 +290,17 @@ def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=
     max_newton = validate.integer(max_newton, "der.continuation: max_newton", "an integer >= 1")
     if max_steps < 1 or max_newton < 1:
         raise ValueError(f"der.continuation: max_steps and max_newton must be >= 1; got {max_steps}, {max_newton}")
+    if predictor not in PREDICTORS:
+        raise ValueError(f"der.continuation: predictor must be one of {PREDICTORS}; got {predictor!r}")
+    if perturb is not None and not callable(perturb):
+        raise TypeError(f"der.continuation: perturb must be a function (p, state) -> RodState or None; got {perturb!r}")
+    if dp is not None:
+        dp = validate.positive_number(dp, "der.continuation: dp")
+    if method != "natural" and (dp is not None or perturb is not None or predictor != "secant"):
+        raise ValueError("der.continuation: dp, perturb and predictor are options of method='natural' (the "
+                         "arclength method steps by ds along its tangent)")
+    if solve is not None and not callable(solve):
+        raise TypeError(f"der.continuation: solve must be a function like der.solve or None; got {solve!r}")
     if not (isinstance(time_budget, (int, float)) and time_budget > 0):
         raise ValueError(f"der.continuation: time_budget must be a number of seconds > 0; got {time_budget!r}")
     if direction is None:
@@ -294,16 +329,20 @@ def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=
                     ds_max=float(ds_max), p_scale=p_scale, max_steps=max_steps, time_budget=float(time_budget),
                     method=method, summaries=summaries, stop=stop, stability=bool(stability), locate=bool(locate),
                     locate_tol=float(locate_tol), n_eigenvalues=n_eigenvalues, tol=float(tol),
-                    max_newton=max_newton, keep_states=bool(keep_states), progress=progress, options=options)
+                    max_newton=max_newton, keep_states=bool(keep_states), progress=progress, options=options,
+                    dp=None if dp is None else float(dp), predictor=predictor, perturb=perturb,
+                    solve=solve or _der_solve)
     problem = _Problem(settings)
     scene = problem.scene(p0)
     if state is not None:
         from .rod import check_state
 
         check_state(scene.rod, state, "der.continuation: state")
-    from .solvers import solve
+    from .solvers import ConvergenceError
 
-    first = solve(scene, state=state, options=options, tol=tol, stability=False)
+    first = settings["solve"](scene, state=state, options=options, tol=tol, stability=False)
+    if not first.converged:
+        raise ConvergenceError(first)
     t0 = np.zeros(problem.n + 1)
     t0[-1] = direction
     return _follow(problem, problem.prepared(p0, first.state), p0, t0, settings, parameter=parameter,
@@ -364,6 +403,26 @@ class _Problem:
         sys_ = self.system(p)
         carry_penalty(sys_, state)
         return prepare_state(sys_, state)
+
+    def admissible(self, p, state):
+        """False if ``state`` violates a contact distance of scene_of(p) (the contact terms' start check; a
+        tight bend alone does not count); True without contact terms."""
+        sys_ = self.system(p)
+        if not sys_.terms:
+            return True
+        import warnings
+
+        from .solvers.system import prepare_state
+
+        work = prepare_state(sys_, state)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                for term in sys_.terms:
+                    term.check_start(work, "warn")
+        except ValueError:
+            return False
+        return True
 
     def inner(self, u, v):
         return float(np.sum(self.weights * u[:-1] * v[:-1]) + self.w_p * u[-1] * v[-1])
@@ -434,14 +493,11 @@ class _Problem:
 
         from .linalg import band_to_coo
 
-        if sys_.links.tri_dep.size:
-            raise ValueError("der.continuation: contact is active on a rod whose end supports link DOFs (a sliding "
-                             "clamp or a pin): the continuation's sparse path does not condense those; use "
-                             "method='natural' (each point a der.solve)")
         n = ab.shape[1]
         rb, cb, vb = band_to_coo(ab, sys_.kl, sys_.ku, sys_.perm)
         rows, cols, vals = [rb], [cb], [vb]
         for r, c, v in coo:
+            r, c, v = condensed_triplets(sys_, r, c, v)
             keep = ~(sys_.fixed[r] | sys_.fixed[c])
             rows.append(r[keep])
             cols.append(c[keep])
@@ -570,6 +626,38 @@ class _Problem:
             state.lam[:] = trial.lam
             p = p_new
         return None
+
+
+def condensed_triplets(system, rows, cols, vals):
+    """Triplets (rows, cols, vals) of a matrix H on the DOFs as those of T^T H T on the end supports' free
+    variables (q_dep = c + sum_k coef_k q_master_k; the band's ``condense_band``): an entry on a dependent row
+    (column) is moved to each of its masters' rows (columns), times the coefficient. Unchanged without links."""
+    lk = getattr(system, "links", None)
+    if lk is None or not lk.tri_dep.size:
+        return rows, cols, vals
+    n = system.fixed.shape[0]
+    # for each DOF: the slice of its (master, coef) entries, or itself with coefficient 1
+    order = np.argsort(lk.tri_dep, kind="stable")
+    dep_sorted, master, coef = lk.tri_dep[order], lk.tri_master[order], lk.tri_coef[order]
+    start = np.searchsorted(dep_sorted, np.arange(n), side="left")
+    count = np.searchsorted(dep_sorted, np.arange(n), side="right") - start
+
+    def expand(idx, other, v):
+        c = count[idx]
+        plain = c == 0
+        out_i, out_o, out_v = [idx[plain]], [other[plain]], [v[plain]]
+        dep = np.flatnonzero(~plain)
+        for k in range(int(c.max(initial=0))):
+            sel = dep[c[dep] > k]
+            j = start[idx[sel]] + k
+            out_i.append(master[j])
+            out_o.append(other[sel])
+            out_v.append(coef[j] * v[sel])
+        return np.concatenate(out_i), np.concatenate(out_o), np.concatenate(out_v)
+
+    r, c, v = expand(np.asarray(rows), np.asarray(cols), np.asarray(vals))
+    c, r, v = expand(c, r, v)
+    return r, c, v
 
 
 def held_dofs(system):
@@ -715,6 +803,8 @@ def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_re
     lo, hi = settings["bounds"]
     ds = settings["ds"]
     natural = settings["method"] == "natural"
+    dp_max = settings.get("dp") if natural else None
+    dp = dp_max
     progress = settings["progress"]
 
     def say(msg):
@@ -751,12 +841,27 @@ def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_re
                 break
             # predictor; a step that would leave the bounds lands on the bound at fixed p
             x = np.append(state.q, p)
-            x_pred = x + ds * t
-            landing = not (lo <= x_pred[-1] <= hi)
+            if dp is not None:         # a fixed parameter step along the secant
+                x_pred = x + (dp / abs(t[-1])) * t
+                # (a bound reached up to rounding counts as reached: no sliver of a last step)
+                landing = x_pred[-1] > hi - 1e-9 * dp_max if t[-1] > 0 else x_pred[-1] < lo + 1e-9 * dp_max
+            else:
+                x_pred = x + ds * t
+                landing = not (lo <= x_pred[-1] <= hi)
             if landing and t[-1] != 0:
-                bound = hi if x_pred[-1] > hi else lo
+                bound = hi if t[-1] > 0 else lo
                 x_pred = x + (bound - p) / t[-1] * t
+                x_pred[-1] = bound
+            t_step = time.perf_counter()
             out = _step(problem, settings, state, p, t, x_pred, natural, landing, branch)
+            if out is None and dp is not None:
+                dp *= 0.5
+                if dp < settings["ds_min"] * problem.p_scale:
+                    status, message = "step_too_small", (
+                        f"no equilibrium found from {parameter} = {p:.8g} with the smallest step "
+                        f"{settings['ds_min'] * problem.p_scale:.3g} (natural continuation stops at a fold)")
+                    break
+                continue
             if out is None:
                 ds *= 0.5
                 if ds < settings["ds_min"]:
@@ -767,7 +872,9 @@ def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_re
                 continue
             new_state, new_p, residual, iterations = out
             t_new = _tangent_of(problem, new_state, new_p, state, p, t, natural)
-            if t_new is None or (not landing and ds > 2 * settings["ds_min"] and (
+            if dp is not None and t_new is None:
+                t_new = t.copy()
+            if dp is None and t_new is None or (dp is None and not landing and ds > 2 * settings["ds_min"] and (
                     problem.inner(t, t_new) < TANGENT_COS or _crowded(settings, row, new_state, t, t_new,
                                                                       problem, new_p))):
                 # the tangent turned by more than ~25 degrees (the step may have jumped branches), or a fold and
@@ -780,6 +887,7 @@ def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_re
             s_total += problem.norm(np.append(new_state.q, new_p) - x)
             prev_row, prev_state, prev_p, prev_t = row, state, p, t
             row = add(new_state, new_p, s_total, t_new, residual, iterations)
+            row["step_time"] = time.perf_counter() - t_step
             state, p, t = new_state, new_p, t_new
             say(f"point {len(branch.points) - 1}: {parameter} = {p:.8g}, dp/ds = {t[-1]:+.3g}, ds = {ds:.3g}"
                 + (f", min eigenvalue {row['min_eigenvalue']:.3g}" if settings["stability"] else ""))
@@ -789,7 +897,11 @@ def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_re
             if landing:
                 status, message = "completed", f"{parameter} reached the bound {p:.8g}"
                 break
-            if iterations <= 3:
+            if dp is not None:
+                dp = min(dp_max, 2.0 * dp)
+            elif iterations <= 3 or natural:
+                # (a natural step is a der.solve, whose pseudo-time iterations count in the hundreds on a contact
+                # state: its convergence is the test; with "<= 3" a halved step never grew back)
                 ds = min(settings["ds_max"], ds * 1.5)
     except KeyboardInterrupt:
         status, message = "interrupted", "interrupted by the user; the points so far are kept"
@@ -815,16 +927,23 @@ def _crowded(settings, row, new_state, t, t_new, problem, new_p):
 
 def _step(problem, settings, state, p, t, x_pred, natural, landing, branch):
     """One corrector from the prediction ``x_pred``; (state, p, residual, iterations) or None."""
-    from .solvers import solve
     from .solvers.system import transport
 
     p_new = float(x_pred[-1])
     if natural:
         pred = state.copy()
-        if not transport(problem.system(p), state, _free_part(problem, p, state, x_pred[:-1]), pred):
+        if settings["predictor"] == "secant" and not transport(
+                problem.system(p), state, _free_part(problem, p, state, x_pred[:-1]), pred):
             return None
-        result = solve(problem.scene(p_new), state=pred, options=settings["options"], tol=settings["tol"],
-                       stability=False, raise_on_failure=False)
+        if not problem.admissible(p_new, pred):
+            pred = state.copy()        # a secant extrapolated into a contact: start from the last point
+        if settings["perturb"] is not None:
+            perturbed = settings["perturb"](p_new, pred.copy())
+            if perturbed is not None and problem.admissible(p_new, perturbed):
+                pred = perturbed
+        options = dataclasses.replace(settings["options"], tight_bend="warn")
+        result = settings["solve"](problem.scene(p_new), state=pred, options=options, tol=settings["tol"],
+                                   stability=False)
         if not result.converged:
             return None
         return problem.prepared(p_new, result.state), p_new, result.residual, result.iterations
@@ -834,6 +953,12 @@ def _step(problem, settings, state, p, t, x_pred, natural, landing, branch):
     pred = problem.prepared(p_new, pred)
     pred.lam[:] = state.lam
     return problem.correct(pred, p_new, t, x_pred, settings["max_newton"], fixed_p=landing)
+
+
+def _der_solve(scene, **kwargs):
+    from .solvers import solve
+
+    return solve(scene, raise_on_failure=False, **kwargs)
 
 
 def _tangent_of(problem, new_state, new_p, state, p, t, natural):
@@ -933,4 +1058,5 @@ def _jsonable(value):
     return jsonable(value)
 
 
-__all__ = ["continuation", "Branch", "critical_eigenvector", "gauge_modes", "METHODS", "KINDS"]
+__all__ = ["continuation", "Branch", "critical_eigenvector", "gauge_modes", "condensed_triplets", "METHODS", "KINDS",
+           "PREDICTORS"]

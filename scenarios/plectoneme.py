@@ -103,46 +103,68 @@ def closed_writhe(x, L):
     return float(dg._writhe(np.ascontiguousarray(np.vstack([x, closure]))))
 
 
-def observe(rod, result, turns, p):
-    st = result.state
-    x = st.positions
-    tw = dg.total_twist(rod, st) / (2 * np.pi)
-    wr = closed_writhe(x, p.L)
-    density = dg.material_twist_density(rod, st)
-    bottom = 0.5 * (x[0] + x[1])
-    top = 0.5 * (x[-2] + x[-1])
-    c = result.contact or {}
-    return {
-        "turns": float(turns), "converged": result.converged, "status": result.status,
-        "extension": float(top[2] - bottom[2]), "torque": float(p.A2 * density.mean()),
-        "twist": tw, "writhe": wr, "linking_number": tw + wr,
-        "min_distance": c.get("min_distance"), "contacts": c.get("n_contacts", 0),
-        "iterations": result.iterations, "runtime_s": result.wall_time,
-    }
-
-
 def run(p, solver):
+    """The continuation in N (der.continuation, natural parameter, fixed steps of --turns / --sweep, each solve
+    warm-started from the last state, the lateral imperfection added to each start until the first contact)."""
     rod = der.rod_from_shape(der.shapes.straight(p.L, p.n), p.A1, p.A2, EA=p.EA)
     contact = der.self_contact(p.radius, samples=p.samples)
-    turns = np.linspace(0.0, p.turns, p.sweep + 1)[1:]
-    state = rod.rest_state()
     xi = rod.rest_q.reshape(-1, 4)[:, 2] / p.L
     bump = np.zeros((rod.n_nodes, 3))
     bump[:, 0] = p.perturb * p.L * np.sin(np.pi * np.clip(xi, 0, 1))
+
+    def scene_of(N):
+        return der.Scene(rod, loads=[der.end_force([0.0, 0.0, p.force])],
+                         constraints=[der.clamp("start"), der.clamp("end", rotation=rotation_z(2 * np.pi * N), slide=2)],
+                         contacts=[contact])
+
+    seen = {}
+
+    def contact_of(scene, state):
+        key = state.q.tobytes()
+        if key not in seen:
+            seen.clear()
+            seen[key] = der.diagnostics.contact_forces(scene, state)
+        return seen[key]
+
+    last = {"contacts": 0}
+
+    def contacts(scene, state):
+        last["contacts"] = contact_of(scene, state)["n_contacts"]
+        return last["contacts"]
+
+    def perturb(N, state):
+        return rod.displaced(state, bump) if p.perturb and not last["contacts"] else None
+
+    def extension(scene, st):
+        x = st.positions
+        return float(0.5 * (x[-2, 2] + x[-1, 2]) - 0.5 * (x[0, 2] + x[1, 2]))
+
+    summaries = {
+        "extension": extension,
+        "torque": lambda scene, st: float(p.A2 * dg.material_twist_density(rod, st).mean()),
+        "twist": lambda scene, st: dg.total_twist(rod, st) / (2 * np.pi),
+        "writhe": lambda scene, st: closed_writhe(st.positions, p.L),
+        "min_distance": lambda scene, st: contact_of(scene, st)["min_distance"],
+        "contacts": contacts,
+    }
+    branch = der.continuation(scene_of, 0.0, p.turns, parameter="turns", method="natural", dp=p.turns / p.sweep,
+                              predictor="last", perturb=perturb, stability=False, tol=solver.args.tol,
+                              options=der.SolverOptions(max_iterations=MAX_ITERATIONS), summaries=summaries,
+                              max_steps=8 * p.sweep, progress=False, keep_states=False, solve=solver.solve)
     steps = []
-    for N in turns:
-        scene = der.Scene(rod, loads=[der.end_force([0.0, 0.0, p.force])],
-                          constraints=[der.clamp("start"), der.clamp("end", rotation=rotation_z(2 * np.pi * N), slide=2)],
-                          contacts=[contact])
-        start = state
-        if p.perturb and not (steps and steps[-1]["contacts"]):
-            start = rod.displaced(state, bump)
-        result = solver.solve(scene, state=start, stability=False, max_iterations=MAX_ITERATIONS)
-        steps.append(observe(rod, result, N, p))
-        if not result.converged:
-            break
-        state = result.state
-    return summarise(p, steps)
+    for pt in branch.points[1:]:
+        row = {k: pt[k] for k in ("turns", "extension", "torque", "twist", "writhe", "min_distance")}
+        row["linking_number"] = row["twist"] + row["writhe"]
+        row.update(contacts=int(pt["contacts"]), converged=True, iterations=pt["newton_iterations"],
+                   runtime_s=pt["step_time"])
+        steps.append(row)
+    out = summarise(p, steps)
+    # every point is a converged solve; a step the continuation could not make (halved down to its smallest
+    # step) ends it short of --turns with its message
+    out["converged"] = branch.status == "completed" and bool(steps)
+    out["continuation"] = {"status": branch.status, "message": branch.message, "points": len(steps),
+                           "wall_s": branch.wall_time}
+    return out
 
 
 def summarise(p, steps):

@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 
 from .options import (
-    STATUSES, ConvergenceError, LockedRodWarning, RoundoffFloorWarning, SolveResult, SolverOptions,
+    STATUSES, ConvergenceError, LockedRodWarning, RoundoffFloorWarning, SolveResult, SolverOptions, TightBendWarning,
 )
 from .system import build_system, numerical_failure, check_equilibrium_exists, locked_rod_note, prepare_state
 
@@ -118,7 +118,7 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
     if not system.terms:                      # (a contact can react to a net load)
         check_equilibrium_exists(system, work)    # refuses a net load on a rigid motion nothing can react to
     for term in system.terms:                 # contact: an inadmissible start is refused before any work
-        term.check_start(work)
+        term.check_start(work, options.tight_bend)
     for term in system.terms:
         term.start_stiffness(work, system)
     recorder = None
@@ -210,7 +210,7 @@ def _solve_several(scene, state, solver, options, record, raise_on_failure):
             except ValueError as exc:
                 raise ValueError(f"rod {i}: {exc}") from None
     for term in system.terms:
-        term.check_start(work)
+        term.check_start(work, options.tight_bend)
     for term in system.terms:
         term.start_stiffness(work, system)
     recorder = None
@@ -324,4 +324,4 @@ def check_stability(scene, state, n_eigenvalues=6):
 
 
 __all__ = ["solve", "check_stability", "SolverOptions", "SolveResult", "ConvergenceError", "STATUSES", "SOLVERS",
-           "RoundoffFloorWarning", "LockedRodWarning"]
+           "RoundoffFloorWarning", "LockedRodWarning", "TightBendWarning"]

@@ -42,6 +42,11 @@ class SolverOptions:
     n_eigenvalues : how many of the lowest eigenvalues to report.
     progress : print progress to stderr (None: only for solves longer than 2 s).
     record_every : log every k-th iteration (implicit) or check (explicit) to a recording.
+    tight_bend : what a contact solve does with a start bent tighter than a contact radius (a radius of curvature
+        below r at some vertex): "refuse" (default: a user's start, ValueError before any work) or "warn" (a
+        ``TightBendWarning``; the start is the model's own equilibrium, as in a continuation's steps, which
+        ``der.continuation`` uses). The contact diagnostics report the tightest bend either way
+        (``result.contact["min_curvature_radius"]``).
 
     Example
     -------
@@ -77,6 +82,7 @@ class SolverOptions:
     n_eigenvalues: int = 6
     progress: bool | None = None
     record_every: int = 1
+    tight_bend: str = "refuse"
 
     def __post_init__(self):
         positive = ("tol", "max_iterations", "max_steps", "time_budget", "dt0", "dt_max", "dt_growth", "safety",
@@ -93,6 +99,8 @@ class SolverOptions:
             raise ValueError(f"SolverOptions.dt must be None or a finite number > 0; got {self.dt!r}")
         if not 0 < self.safety <= 1:
             raise ValueError(f"SolverOptions.safety must be in (0, 1]; got {self.safety!r}")
+        if self.tight_bend not in TIGHT_BEND:
+            raise ValueError(f"SolverOptions.tight_bend must be one of {TIGHT_BEND}; got {self.tight_bend!r}")
         if not 0 < self.armijo < 0.5:
             raise ValueError(f"SolverOptions.armijo must be in (0, 0.5); got {self.armijo!r}")
 
@@ -119,6 +127,24 @@ STATUSES = {
 
 
 CONVERGED_STATUSES = ("converged", "converged_at_floor")
+
+
+TIGHT_BEND = ("refuse", "warn")
+
+
+class TightBendWarning(UserWarning):
+    """A contact solve started from a state bent tighter than the contact radius (radius of curvature below r at
+    some vertex; ``SolverOptions(tight_bend="warn")``, as in ``der.continuation``'s steps). Neighbours within an
+    arc pi r + dhat are not contact partners, so the barrier does not forbid such a bend: the rod model (a thin
+    rod, a centreline) allows it, a real rod of radius r would crush its inside there. The message names the
+    vertex and its radius of curvature.
+
+    Example
+    -------
+    >>> import warnings, der
+    >>> options = der.SolverOptions(tight_bend="warn")      # what der.continuation's steps use
+    >>> # with warnings.catch_warnings(record=True) as w: der.solve(scene, state=state, options=options)
+    """
 
 
 class RoundoffFloorWarning(UserWarning):

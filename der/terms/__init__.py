@@ -10,7 +10,9 @@ Interface of a term record:
 
 - ``check_scene(scene)``: ValueError for what needs the rod (e.g. a radius the rod's curvature forbids);
 - ``bind(system)`` -> a bound term for one solve, with
-  - ``check_start(state)``: ValueError if the starting state already violates the term (naming edges/gaps);
+  - ``check_start(state, tight_bend="refuse")``: ValueError if the starting state already violates the term
+    (naming edges/gaps); a start bent tighter than the contact radius is refused ("refuse", a user's start) or
+    warned about ("warn": SolverOptions.tight_bend, a continuation step starting from the model's own equilibrium);
   - ``evaluate(state, order, grad, ab, coo)`` -> energy: adds dE/dq into ``grad`` (order >= 1); with order 2
     adds band-local Hessian blocks into the band ``ab`` and appends off-band COO triplets (rows, cols, vals)
     to the list ``coo`` (only terms with ``couples_dofs``); +inf for an inadmissible state;

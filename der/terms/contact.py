@@ -41,9 +41,12 @@ def stiffness_bounds(system, dhat):
     return k_min, KAPPA_RANGE * k_min
 
 
-def curvature_radius_check(rod, state, radius, where):
-    """ValueError if the rod's natural or start curvature radius is not larger than ``radius``: a rod bent
-    tighter than its own radius would overlap itself on the inside of the bend."""
+def curvature_radius_check(rod, state, radius, where, tight_bend="refuse"):
+    """ValueError if the rod's natural curvature radius is not larger than ``radius`` (bad input: a rod cannot be
+    made tighter than its own radius), and for the start ``state`` bent tighter than ``radius``: a ValueError
+    ("refuse": a user's start) or a TightBendWarning ("warn": the start is the model's own equilibrium, as in a
+    continuation's steps -- neighbours within an arc pi r + dhat are not contact partners, so the model allows
+    such a bend; the warning says where)."""
     kb = np.linalg.norm(np.asarray(rod.kappa_bar, float).reshape(rod.n_vertices, -1), axis=1)
     if kb.size:
         k0 = float((kb / rod.voronoi).max())
@@ -52,13 +55,30 @@ def curvature_radius_check(rod, state, radius, where):
             raise ValueError(f"{where}: radius {radius:g} is not smaller than the rod's natural radius of curvature "
                              f"{1 / k0:.6g} (at vertex {v}); a rod cannot bend tighter than its own radius")
     if state is not None and rod.n_vertices:
-        from ..diagnostics import curvature
+        R, v = min_curvature_radius(rod, state)
+        if R <= radius:
+            msg = (f"{where}: the starting state bends to a radius of curvature {R:.6g} at vertex {v}, not larger "
+                   f"than the radius {radius:g}")
+            if tight_bend == "refuse":
+                raise ValueError(msg)
+            import warnings
 
-        k = curvature(rod, state)
-        if float(k.max()) * radius >= 1.0:
-            v = int(np.argmax(k))
-            raise ValueError(f"{where}: the starting state bends to a radius of curvature {1 / k[v]:.6g} at vertex {v}, "
-                             f"not larger than the radius {radius:g}")
+            from ..solvers.options import TightBendWarning
+
+            warnings.warn(msg + " (a continuation step from the model's own equilibrium: solved on; neighbours "
+                          "within an arc pi r + dhat are not contact partners)", TightBendWarning, stacklevel=4)
+
+
+def min_curvature_radius(rod, state):
+    """(the smallest radius of curvature of ``state``, its vertex): 1 / max kappa_i (der.diagnostics.curvature;
+    inf for a straight rod, vertex -1 for a rod without vertices)."""
+    if not rod.n_vertices:
+        return math.inf, -1
+    from ..diagnostics import curvature
+
+    k = curvature(rod, state)
+    v = int(np.argmax(k))
+    return (1.0 / float(k[v]) if k[v] > 0 else math.inf), v
 
 
 @register
@@ -273,8 +293,8 @@ class BoundSelfContact(BoundBarrier):
         self._list = (pos.copy(), pairs)
         return pairs if pos1 is None else self.candidates(pos, pos1)
 
-    def check_start(self, state):
-        curvature_radius_check(self.rod, state, self.radius, "der.self_contact")
+    def check_start(self, state, tight_bend="refuse"):
+        curvature_radius_check(self.rod, state, self.radius, "der.self_contact", tight_bend)
         pos = self.positions(state)
         pairs = self.C.candidate_pairs(pos, self.topo, 0.0)
         if pairs.shape[0]:
@@ -372,6 +392,13 @@ class BoundSelfContact(BoundBarrier):
             tau = min(tau, tau_s)
         return float(tau)
 
+    def _min_curvature_radius(self, state):
+        """The tightest bend over the rods this term sees (one rod, or those of der.rod_contact)."""
+        rods = getattr(self, "rods", None)
+        if rods is None:
+            return min_curvature_radius(self.rod, state)[0]
+        return min(min_curvature_radius(r, s)[0] for r, s in zip(rods, getattr(state, "rods", [state])))
+
     def diagnostics(self, state):
         """Pairs in contact (gap < dhat), their gaps, forces (-kappa b'(gap), force units), forces per length
         (over the pair's mean rest edge length), contact points, and the smallest centreline distance over all
@@ -405,6 +432,7 @@ class BoundSelfContact(BoundBarrier):
             "force_per_length": per_length.tolist(), "total_force": float(force.sum()),
             "points": (0.5 * (pa + pb)).tolist(), "normals": _unit(pa - pb).tolist(),
             "min_distance": float(g_min + 2 * self.radius), "min_distance_edges": [int(ea), int(eb)],
+            "min_curvature_radius": self._min_curvature_radius(state),
         }
 
 
@@ -545,10 +573,10 @@ class BoundRodContact(BoundSelfContact):
         i = int(np.searchsorted(self.edge_offsets, e, side="right") - 1)
         return i, int(e - self.edge_offsets[i])
 
-    def check_start(self, state):
+    def check_start(self, state, tight_bend="refuse"):
         rod_states = getattr(state, "rods", [state])
         for i, (rod, s, r) in enumerate(zip(self.rods, rod_states, self.radii)):
-            curvature_radius_check(rod, s, r, f"der.rod_contact (rod {i})")
+            curvature_radius_check(rod, s, r, f"der.rod_contact (rod {i})", tight_bend)
         pos = self.positions(state)
         pairs = self.C.candidate_pairs(pos, self.topo, 0.0)
         if pairs.shape[0]:

@@ -143,7 +143,7 @@ class BoundObstacle(BoundBarrier):
         self.node_dof = 4 * np.arange(rod.n_nodes, dtype=np.int64)
         self._init_stiffness(term.kappa, system)
 
-    def check_start(self, state):
+    def check_start(self, state, tight_bend="refuse"):
         pos = self.positions(state)
         gaps = np.array([self.A.edge_obstacle_gap(pos, a, b, self.term.kind, self.params, self.radius)
                          for a, b in self.edges])

@@ -362,3 +362,24 @@ def test_a_scene_of_several_rods_is_refused_by_name():
         pytest.skip("this der has no scenes of several rods")
     with pytest.raises(ValueError, match="scene"):
         der.simulate(der.Scene([a, b]), 1.0, dt=0.1)
+
+
+@pytest.mark.parametrize("theta", [np.pi / 2, np.pi])
+def test_capstan_rope_holds_below_and_slips_above_exp_mu_theta(theta):
+    """A rope over a fixed cylinder (tools/capstan.py: draped start from der.solve, T2 ramped, lagged smoothed
+    Coulomb friction mu = 0.3): at T2 = 0.8 T1 exp(mu theta) the light end creeps slower than the slip velocity
+    (holds), at 1.25 T1 exp(mu theta) it slides more than ten times faster (slips)."""
+    import importlib.util
+    import pathlib
+
+    spec = importlib.util.spec_from_file_location(
+        "capstan", pathlib.Path(__file__).resolve().parents[1] / "tools" / "capstan.py")
+    capstan = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(capstan)
+    hold, _ = capstan.run(theta, 0.8)
+    slip, _ = capstan.run(theta, 1.25)
+    assert hold["status"] == slip["status"] == "completed"
+    assert hold["verdict"] == "holds" and slip["verdict"] == "slips"
+    assert 0 <= hold["speed"] < hold["slip_velocity"]
+    assert slip["speed"] > 10 * hold["slip_velocity"]
+    assert slip["slide"] > 10 * abs(hold["slide"])

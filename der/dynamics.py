@@ -545,10 +545,12 @@ def simulate(scene, t_end, dt=None, integrator="newmark", state=None, velocity=N
     strain_tol = validate.positive_number(strain_tol, "der.simulate: strain_tol", "a finite number > 0")
     from .terms.obstacles import Obstacle
 
-    for term in scene.contacts:
-        if not isinstance(term, Obstacle):
-            raise ValueError("der.simulate: contacts: only obstacles (der.plane, der.sphere, der.cylinder) in dynamics "
-                             f"so far; self-contact ({type(term).__name__}) needs the sparse solve (use der.solve)")
+    if integrator == "verlet":
+        for term in scene.contacts:
+            if not isinstance(term, Obstacle):
+                raise ValueError("der.simulate: contacts: self-contact "
+                                 f"({type(term).__name__}) needs integrator='newmark' (its Hessian joins the "
+                                 "implicit step's Newton system)")
     friction = validate.real_number(friction, "der.simulate: friction", "a Coulomb coefficient >= 0")
     if not friction >= 0:
         raise ValueError(f"der.simulate: friction must be a Coulomb coefficient >= 0; got {friction!r}")
@@ -907,7 +909,13 @@ class _NewmarkRun(_Run):
                     work *= kfac
                 add_diagonal(work, sysm.kl, sysm.ku, sysm.perm, mdiag, 1.0)
                 constrain_system(sysm, work, 1.0)
-                delta, info = band_solve(work, sysm.kl, sysm.ku, sysm.perm, R)
+                coo = sysm.contact_coo if sysm.terms else None
+                if coo:         # self-contact pairs couple DOFs off the band: the contact solve of der.solve
+                    from .solvers.implicit import _contact_solve
+
+                    delta, info = _contact_solve(sysm, work, coo, R)
+                else:
+                    delta, info = band_solve(work, sysm.kl, sysm.ku, sysm.perm, R)
                 self.newton += 1
                 if info != 0 or not np.all(np.isfinite(delta)):
                     return False, ("newton_failed", f"singular or non-finite Newton system at t = {t1:g}")
@@ -938,7 +946,9 @@ class _NewmarkRun(_Run):
                 dth = float(np.abs(d[:, 3]).max())
                 for term in sysm.terms:             # near the solution: the exact (unprojected) barrier Hessian
                     term.project = dx > 1e-4 * self.h
-                if dx <= self.xtol and dth <= self.newton_tol:
+                # converged on a full Newton correction only: a step cut short by the CCD bound is small because
+                # the obstacle stopped it, not because the residual vanished
+                if a == 1.0 and dx <= self.xtol and dth <= self.newton_tol:
                     converged = True
                     break
             if not converged:
@@ -991,8 +1001,11 @@ class _NewmarkRun(_Run):
         sysm, rod = self.system, self.rod
         g = np.zeros(rod.n_dof)
         evaluate_system(sysm, state, 1)                 # sets each term's active set at this state
+        from .terms.obstacles import BoundObstacle
+
         for term in sysm.terms:
-            term.evaluate(state, 1, g, sysm.ab, [])
+            if isinstance(term, BoundObstacle):     # friction at the obstacles; self-contact is frictionless
+                term.evaluate(state, 1, g, sysm.ab, [])
         f = -g.reshape(-1, 4)[:, :3]
         N = np.linalg.norm(f, axis=1)
         normals = np.divide(f, N[:, None], out=np.zeros_like(f), where=N[:, None] > 0)

@@ -904,6 +904,7 @@ class _NewmarkRun(_Run):
                 sysm.fext[:] = R_full            # residual_vector reads fext - grad
                 sysm.grad[:] = 0.0
                 R = residual_vector(sysm)
+                rnorm = float(R @ R)          # before the solve (which may overwrite R)
                 work[:] = sysm.ab                # K, with the drag Jacobian already subtracted... see below
                 if kfac != 1.0:
                     work *= kfac
@@ -938,6 +939,10 @@ class _NewmarkRun(_Run):
                                 term.kappa = min(2.0 * term.kappa, term.kappa_max)
                                 term.kappa_updates += 1
                         cut = 0
+                if fric is not None and it > 0:
+                    # friction's slip law bends sharply over the slip velocity: a full Newton correction can
+                    # overshoot and cycle. Backtracking on the residual norm (at most 2^-10 of the correction)
+                    delta = self._backtrack(s0, trial, delta, rnorm, fric, v0, a0, acc0)
                 q_new = trial.q + delta
                 if not transport(sysm, s0, q_new, trial):
                     return False, ("newton_failed", f"a Newton step reversed an edge at t = {t1:g}; reduce dt")
@@ -992,6 +997,34 @@ class _NewmarkRun(_Run):
         self.state = trial
         self.v, self.a, self.acc = v1, a1, acc1
         return True, None
+
+    def _residual(self, s0, state, fric, v0, a0, acc0):
+        """The step's residual (free DOFs) at ``state``, friction included (order 1: no Jacobian)."""
+        from .solvers.system import residual_vector
+
+        sysm, model = self.system, self.model
+        v1, _, acc1 = self._kinematics(state.q - s0.q, v0, a0, acc0)
+        F, _, _ = model.forces(state, v1, 1)
+        add_friction(state.q, s0.q, fric[0], fric[1], self.friction, fric[2], self.dt, F, np.zeros((0, 0)),
+                     sysm.kl, sysm.ku, sysm.perm)
+        sysm.fext[:] = F - model.mass * acc1
+        sysm.grad[:] = 0.0
+        return residual_vector(sysm).copy()
+
+    def _backtrack(self, s0, trial, delta, r0, fric, v0, a0, acc0):
+        """The largest delta * 2^-k (k <= 10) whose residual norm is below that of ``trial`` (R); delta itself
+        if none is (r0: the squared residual norm at ``trial``)."""
+        from .solvers.system import transport
+
+        step = delta
+        for _ in range(11):
+            cand = trial.copy()
+            if transport(self.system, s0, trial.q + step, cand):
+                Rc = self._residual(s0, cand, fric, v0, a0, acc0)
+                if float(Rc @ Rc) < r0:
+                    return step
+            step = 0.5 * step
+        return delta
 
     def _lagged_contact(self, state):
         """(normals (n_nodes, 3), normal forces (n_nodes,), eps_v): each node's barrier force at ``state``, the

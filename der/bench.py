@@ -148,6 +148,15 @@ class DerSolver:
         if np.linalg.norm(chord) < 1e-9 * L:
             raise NotImplementedError("a rod whose ends start at the same point (no chord for the rest axis)")
         axis = chord / np.linalg.norm(chord)
+        drivens = [end for end in End if rod.condition(end) is EndCondition.CLAMPED and rod.motion(end) is not None]
+        if len(drivens) == 1:
+            # one driven clamp (the pile): the rest axis along its end's start tangent, so that the clamp holds
+            # the start as it is (a bowed rope's chord is not its end tangent)
+            i, j = (0, 1) if drivens[0] is End.START else (-1, -2)
+            tangent = (points[j] - points[i]) * (1 if i == 0 else -1)
+            tangent /= np.linalg.norm(tangent)
+            if abs(tangent @ axis - 1) > 1e-9:
+                axis = tangent
         normal = np.asarray(rod.normal, float)
         director = normal - (normal @ axis) * axis
         if np.linalg.norm(director) < 1e-9:

@@ -17,8 +17,18 @@ along ``slides_along``), pinned ends ``der.hinge``, end loads ``der.end_force``,
 Numerics: quasi-static experiments without driven ends go to ``der.solve`` (the final state is the equilibrium:
 every frame after t = 0 is it); the others run ``der.simulate`` (Newmark average acceleration, no numerical
 dissipation) with, for quasi-static ones, mass-proportional damping at twice the scenario's slowest frequency
-(the rule of the suite's other adapters). Contact and friction are not modelled (capabilities: stretch only):
-crossing, capstan and pile are reported unsupported.
+(the rule of the suite's other adapters).
+
+Contact (docs/dynamics.md): several rods (crossing: quasi-static, no driven ends) are solved together by
+``der.solve`` on one ``der.Scene`` of the rods with ``der.rod_contact``; obstacles (capstan's cylinder, pile's floor)
+are ``der.cylinder`` / ``der.plane`` offset by the rod's radius, with lagged smoothed Coulomb friction (the larger of
+the obstacle's and the rod's coefficient, slip velocity 1e-4 rod lengths per second) in ``der.simulate``, and
+self-contact (``der.self_contact``) where the scenario says the rod can reach itself (pile); der's self-contact is
+frictionless (no ROD_FRICTION). Contact runs use the generalized-alpha step with rho_inf = 0 (the suite lets
+quasi-static runs dissipate; the trapezoidal rule gains energy at stiff impacts and lets the rope ring on the
+barrier). A rope lying on a cylinder (capstan) starts from its frictionless contact equilibrium with the middle of
+the wrap pinned (``der.solve``), which gives the contact forces and the barrier's stiffness their right values;
+friction takes over the pin's load in the first steps.
 """
 import math
 
@@ -73,7 +83,9 @@ class DerSolver:
         static = scenario.quasi_static and not driven and not scenario.obstacles
         contact = bool(scenario.obstacles)
         return {
-            "method": "der.solve (static equilibrium)" if static else "der.simulate (Newmark average acceleration)",
+            "method": "der.solve (static equilibrium)" if static else (
+                "der.simulate (generalized-alpha, rho_inf 0, contact)" if contact
+                else "der.simulate (Newmark average acceleration)"),
             "dt": interval / steps, "steps_per_frame": steps,
             "damping_rate": 2.0 * scenario.slowest_frequency() if scenario.quasi_static and not static else 0.0,
             "static": static,

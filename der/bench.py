@@ -106,7 +106,9 @@ class DerSolver:
         """Simulate ``scenario`` with ``n_elements`` elements per rod; ``n_frames`` evenly spaced frames."""
         numerics = self._numerics(scenario, n_frames)
         times = np.linspace(0.0, scenario.duration, n_frames)
-        if len(scenario.rods) > 1:
+        if len(scenario.rods) > 1 and numerics["static"]:
+            # rods at rest together (crossing): one scene with contact between them. Driven rods side by side
+            # (twist) run one by one, as before: der.simulate has one rod per scene (they do not touch there)
             return Trajectory(times, *self._run_rods(scenario, n_elements, n_frames, numerics))
         positions, directors = [], []
         for rod in scenario.rods:
@@ -120,9 +122,6 @@ class DerSolver:
     def _run_rods(self, scenario, n_elements, n_frames, numerics):
         """Several rods touching each other: their equilibrium by ``der.solve`` on one scene with
         ``der.rod_contact`` (quasi-static, no driven ends, no obstacles)."""
-        if not numerics["static"] or scenario.obstacles:
-            raise NotImplementedError("several rods are supported quasi-statically without driven ends or "
-                                      "obstacles (der.simulate runs one rod per scene)")
         parts, rods, starts = [], [], []
         for rod in scenario.rods:
             drod, start, constraints, driven, loads = self._setup(scenario, rod, n_elements)

@@ -470,7 +470,9 @@ def simulate(scene, t_end, dt=None, integrator="newmark", state=None, velocity=N
         Coulomb coefficient mu at the scene's obstacle contacts (``contacts=[der.cylinder(...)]``, "newmark"):
         lagged smoothed friction as in IPC -- the normal force and contact normal of each node from the barrier
         at the start of the step, a friction force -mu N f1(|u|) u / |u| on its tangential velocity u over the
-        step, f1 rising smoothly from 0 to 1 over the slip velocity.
+        step, f1 rising smoothly from 0 to 1 over the slip velocity. Self-contact (``der.self_contact``) is
+        frictionless; its barrier joins the implicit step's Newton system as in ``der.solve`` (rho_inf = 0 is
+        advised for impacts: the trapezoidal rule can gain energy on the stiff barrier, docs/dynamics.md).
     slip_velocity : float > 0, optional: the smoothing velocity eps_v (default 1e-3 edge lengths per step:
         h / (1000 dt)); a sticking contact creeps at most at about this speed.
     rho_inf : float in [0, 1], "newmark" only: the spectral radius at infinite frequency of the generalized-alpha

@@ -470,7 +470,9 @@ def simulate(scene, t_end, dt=None, integrator="newmark", state=None, velocity=N
         Coulomb coefficient mu at the scene's obstacle contacts (``contacts=[der.cylinder(...)]``, "newmark"):
         lagged smoothed friction as in IPC -- the normal force and contact normal of each node from the barrier
         at the start of the step, a friction force -mu N f1(|u|) u / |u| on its tangential velocity u over the
-        step, f1 rising smoothly from 0 to 1 over the slip velocity.
+        step, f1 rising smoothly from 0 to 1 over the slip velocity. Self-contact (``der.self_contact``) is
+        frictionless; its barrier joins the implicit step's Newton system as in ``der.solve`` (rho_inf = 0 is
+        advised for impacts: the trapezoidal rule can gain energy on the stiff barrier, docs/dynamics.md).
     slip_velocity : float > 0, optional: the smoothing velocity eps_v (default 1e-3 edge lengths per step:
         h / (1000 dt)); a sticking contact creeps at most at about this speed.
     rho_inf : float in [0, 1], "newmark" only: the spectral radius at infinite frequency of the generalized-alpha
@@ -545,10 +547,12 @@ def simulate(scene, t_end, dt=None, integrator="newmark", state=None, velocity=N
     strain_tol = validate.positive_number(strain_tol, "der.simulate: strain_tol", "a finite number > 0")
     from .terms.obstacles import Obstacle
 
-    for term in scene.contacts:
-        if not isinstance(term, Obstacle):
-            raise ValueError("der.simulate: contacts: only obstacles (der.plane, der.sphere, der.cylinder) in dynamics "
-                             f"so far; self-contact ({type(term).__name__}) needs the sparse solve (use der.solve)")
+    if integrator == "verlet":
+        for term in scene.contacts:
+            if not isinstance(term, Obstacle):
+                raise ValueError("der.simulate: contacts: self-contact "
+                                 f"({type(term).__name__}) needs integrator='newmark' (its Hessian joins the "
+                                 "implicit step's Newton system)")
     friction = validate.real_number(friction, "der.simulate: friction", "a Coulomb coefficient >= 0")
     if not friction >= 0:
         raise ValueError(f"der.simulate: friction must be a Coulomb coefficient >= 0; got {friction!r}")
@@ -902,12 +906,19 @@ class _NewmarkRun(_Run):
                 sysm.fext[:] = R_full            # residual_vector reads fext - grad
                 sysm.grad[:] = 0.0
                 R = residual_vector(sysm)
+                rnorm = float(R @ R)          # before the solve (which may overwrite R)
                 work[:] = sysm.ab                # K, with the drag Jacobian already subtracted... see below
                 if kfac != 1.0:
                     work *= kfac
                 add_diagonal(work, sysm.kl, sysm.ku, sysm.perm, mdiag, 1.0)
                 constrain_system(sysm, work, 1.0)
-                delta, info = band_solve(work, sysm.kl, sysm.ku, sysm.perm, R)
+                coo = sysm.contact_coo if sysm.terms else None
+                if coo:         # self-contact pairs couple DOFs off the band: the contact solve of der.solve
+                    from .solvers.implicit import _contact_solve
+
+                    delta, info = _contact_solve(sysm, work, coo, R)
+                else:
+                    delta, info = band_solve(work, sysm.kl, sysm.ku, sysm.perm, R)
                 self.newton += 1
                 if info != 0 or not np.all(np.isfinite(delta)):
                     return False, ("newton_failed", f"singular or non-finite Newton system at t = {t1:g}")
@@ -930,6 +941,10 @@ class _NewmarkRun(_Run):
                                 term.kappa = min(2.0 * term.kappa, term.kappa_max)
                                 term.kappa_updates += 1
                         cut = 0
+                if fric is not None and it > 0:
+                    # friction's slip law bends sharply over the slip velocity: a full Newton correction can
+                    # overshoot and cycle. Backtracking on the residual norm (at most 2^-10 of the correction)
+                    delta = self._backtrack(s0, trial, delta, rnorm, fric, v0, a0, acc0)
                 q_new = trial.q + delta
                 if not transport(sysm, s0, q_new, trial):
                     return False, ("newton_failed", f"a Newton step reversed an edge at t = {t1:g}; reduce dt")
@@ -938,7 +953,9 @@ class _NewmarkRun(_Run):
                 dth = float(np.abs(d[:, 3]).max())
                 for term in sysm.terms:             # near the solution: the exact (unprojected) barrier Hessian
                     term.project = dx > 1e-4 * self.h
-                if dx <= self.xtol and dth <= self.newton_tol:
+                # converged on a full Newton correction only: a step cut short by the CCD bound is small because
+                # the obstacle stopped it, not because the residual vanished
+                if a == 1.0 and dx <= self.xtol and dth <= self.newton_tol:
                     converged = True
                     break
             if not converged:
@@ -983,6 +1000,34 @@ class _NewmarkRun(_Run):
         self.v, self.a, self.acc = v1, a1, acc1
         return True, None
 
+    def _residual(self, s0, state, fric, v0, a0, acc0):
+        """The step's residual (free DOFs) at ``state``, friction included (order 1: no Jacobian)."""
+        from .solvers.system import residual_vector
+
+        sysm, model = self.system, self.model
+        v1, _, acc1 = self._kinematics(state.q - s0.q, v0, a0, acc0)
+        F, _, _ = model.forces(state, v1, 1)
+        add_friction(state.q, s0.q, fric[0], fric[1], self.friction, fric[2], self.dt, F, np.zeros((0, 0)),
+                     sysm.kl, sysm.ku, sysm.perm)
+        sysm.fext[:] = F - model.mass * acc1
+        sysm.grad[:] = 0.0
+        return residual_vector(sysm).copy()
+
+    def _backtrack(self, s0, trial, delta, r0, fric, v0, a0, acc0):
+        """The largest delta * 2^-k (k <= 10) whose residual norm is below that of ``trial`` (R); delta itself
+        if none is (r0: the squared residual norm at ``trial``)."""
+        from .solvers.system import transport
+
+        step = delta
+        for _ in range(11):
+            cand = trial.copy()
+            if transport(self.system, s0, trial.q + step, cand):
+                Rc = self._residual(s0, cand, fric, v0, a0, acc0)
+                if float(Rc @ Rc) < r0:
+                    return step
+            step = 0.5 * step
+        return delta
+
     def _lagged_contact(self, state):
         """(normals (n_nodes, 3), normal forces (n_nodes,), eps_v): each node's barrier force at ``state``, the
         lagged normal force and direction of the friction law."""
@@ -991,8 +1036,11 @@ class _NewmarkRun(_Run):
         sysm, rod = self.system, self.rod
         g = np.zeros(rod.n_dof)
         evaluate_system(sysm, state, 1)                 # sets each term's active set at this state
+        from .terms.obstacles import BoundObstacle
+
         for term in sysm.terms:
-            term.evaluate(state, 1, g, sysm.ab, [])
+            if isinstance(term, BoundObstacle):     # friction at the obstacles; self-contact is frictionless
+                term.evaluate(state, 1, g, sysm.ab, [])
         f = -g.reshape(-1, 4)[:, :3]
         N = np.linalg.norm(f, axis=1)
         normals = np.divide(f, N[:, None], out=np.zeros_like(f), where=N[:, None] > 0)

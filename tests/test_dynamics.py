@@ -362,3 +362,68 @@ def test_a_scene_of_several_rods_is_refused_by_name():
         pytest.skip("this der has no scenes of several rods")
     with pytest.raises(ValueError, match="scene"):
         der.simulate(der.Scene([a, b]), 1.0, dt=0.1)
+
+
+@pytest.mark.parametrize("theta", [np.pi / 2, np.pi])
+def test_capstan_rope_holds_below_and_slips_above_exp_mu_theta(theta):
+    """A rope over a fixed cylinder (tools/capstan.py: draped start from der.solve, T2 ramped, lagged smoothed
+    Coulomb friction mu = 0.3): at T2 = 0.8 T1 exp(mu theta) the light end creeps slower than the slip velocity
+    (holds), at 1.25 T1 exp(mu theta) it slides more than ten times faster (slips)."""
+    import importlib.util
+    import pathlib
+
+    spec = importlib.util.spec_from_file_location(
+        "capstan", pathlib.Path(__file__).resolve().parents[1] / "tools" / "capstan.py")
+    capstan = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(capstan)
+    hold, _ = capstan.run(theta, 0.8)
+    slip, _ = capstan.run(theta, 1.25)
+    assert hold["status"] == slip["status"] == "completed"
+    assert hold["verdict"] == "holds" and slip["verdict"] == "slips"
+    assert 0 <= hold["speed"] < hold["slip_velocity"]
+    assert slip["speed"] > 10 * hold["slip_velocity"]
+    assert slip["slide"] > 10 * abs(hold["slide"])
+
+
+def _hairpin(n_arm=12, a=0.1, L=0.6):
+    h = L / n_arm
+    n_arc = int(round(np.pi * a / h))
+    pts = [np.array([L - k * h, a, 0.0]) for k in range(n_arm)]
+    pts += [np.array([-a * np.sin(np.pi * k / n_arc), a * np.cos(np.pi * k / n_arc), 0.0]) for k in range(n_arc)]
+    pts += [np.array([k * h, -a, 0.0]) for k in range(n_arm + 1)]
+    return np.array(pts)
+
+
+def _arm_distance(P, n_arm=12):
+    """Smallest distance between the two straight arms of the hairpin (6 points on every edge)."""
+    s = np.linspace(0, 1, 6)[None, :, None]
+
+    def sample(Q):
+        return (Q[:-1, None, :] * (1 - s) + Q[1:, None, :] * s).reshape(-1, 3)
+
+    up, lo = sample(P[:n_arm]), sample(P[-n_arm - 1:])
+    return float(np.linalg.norm(up[:, None] - lo[None], axis=2).min())
+
+
+def test_self_contact_in_dynamics_keeps_the_strands_apart_and_adds_no_energy():
+    """A free hairpin (rest shape) whose arms are thrown at each other: the self-contact barrier joins the
+    implicit step's Newton system (der.solve's contact solve), the arms never come closer than 2 r, they bounce
+    back, and the dissipative step (rho_inf = 0) adds no energy at the impacts. (Without contact the arms pass
+    through each other: the same run conserves energy to 1e-6 and comes to 2e-4 between centrelines.)"""
+    rod = der.rod_from_shape(der.shapes.polyline(_hairpin()), A1=1e-3, A2=1e-3, EA=10.0, rho_A=1.0, rho_J=1e-5)
+    r = 0.02
+    x = rod.rest_state().positions
+    v = np.zeros((rod.n_nodes, 3))
+    tip = x[:, 0] > 0.3
+    v[tip, 1] = -np.sign(x[tip, 1]) * (x[tip, 0] - 0.3) / 0.3
+    traj = der.simulate(der.Scene(rod, contacts=[der.self_contact(r)]), 0.3, dt=2e-3, velocity=v, rho_inf=0.0,
+                        save_every=5, progress=False)
+    assert traj.completed
+    d = np.array([_arm_distance(P) for P in traj.positions])
+    assert d.min() >= 2 * r
+    assert d.min() < 2 * r + 0.1 * r                     # they did touch (within dhat)
+    assert traj.energies["contact"].max() > 0
+    E = traj.energies["total"]
+    assert np.all(E <= E[0] * (1 + 1e-9))
+    vy = traj.velocities.reshape(len(traj.times), -1, 4)[:, 0, 1]
+    assert vy[0] < 0 < vy[-1]                            # the upper arm's tip came down and bounced back up

@@ -62,11 +62,12 @@ from .scene import Scene
 
 METHODS = ("arclength", "natural")
 PREDICTORS = ("secant", "last")
-KINDS = ("fold", "bifurcation", "hopf")
+KINDS = ("fold", "bifurcation", "hopf", "target")
 GAUGE_REGULARISATION = 1e-12   # times diag|K|, only when the rod has free rigid motions (they are projected out)
 GAUGE_TOL = 1e-6               # |K v| <= GAUGE_TOL |K| |v|: a rigid motion the stiffness annihilates
 DENSE_EIGENVECTOR_MAX_DOFS = 2400
 GAUGE_ANGLE_WEIGHT = 1e-8        # rigid motions are fitted on the node coordinates (Problem.gauge_coordinates)
+RP_REUSE_RATE = 0.1            # the corrector keeps dR/dp while each Newton step cuts the residual 10x or more
 TANGENT_COS = 0.9              # a step whose tangent turns by more than acos(0.9) = 26 degrees is halved
 
 
@@ -81,7 +82,7 @@ class Branch:
         updates of the corrector), ``min_eigenvalue``, ``stable``, ``flutter`` and ``stability_time`` (seconds
         of the eigenvalue computation at that point).
     states : the RodState of each point (empty if ``keep_states=False``).
-    special : list of dicts: the located special points, each with ``kind`` ("fold", "bifurcation" or "hopf"),
+    special : list of dicts: the located special points, each with ``kind`` ("fold", "bifurcation", "hopf", or "target": where a summary reached ``target``),
         the parameter, ``index`` (it lies between points index - 1 and index), ``s``, ``min_eigenvalue``,
         the summaries, ``located_to`` (the width of the final bracket, in the parameter) and ``state``.
     status : "completed" (reached a bound or the stop condition), "max_steps", "time_budget", "step_too_small"
@@ -193,6 +194,7 @@ class Branch:
             raise ValueError(f"Branch.switch: side must be +1 or -1; got {side!r}")
         settings = dict(self._settings)
         settings["stop"] = None          # the old branch's stop condition is about the old branch
+        settings["target"] = None
         settings.update(overrides)
         settings["ds"] = settings["ds"] if ds is None else ds
         problem = _Problem(settings)
@@ -212,8 +214,8 @@ class Branch:
 
 def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=None, direction=None, ds=0.05,
                  ds_min=1e-6, ds_max=0.25, p_scale=None, max_steps=200, time_budget=math.inf, method="arclength",
-                 summaries=None, stop=None, stability=True, locate=True, locate_tol=1e-7, n_eigenvalues=6,
-                 tol=1e-8, max_newton=12, keep_states=True, progress=None, options=None, dp=None,
+                 summaries=None, stop=None, target=None, stability=True, locate=True, locate_tol=1e-7,
+                 n_eigenvalues=6, tol=1e-8, max_newton=12, keep_states=True, progress=None, options=None, dp=None,
                  predictor="secant", perturb=None, solve=None):
     """Follow an equilibrium of ``scene_of(p)`` as p changes, from ``p0``.
 
@@ -235,6 +237,9 @@ def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=
     method : "arclength" (default; passes folds) or "natural" (p steps, each a der.solve; stops at a fold).
     summaries : {name: f(scene, state) -> float}: scalar columns of the table.
     stop : optional f(point dict) -> bool; True ends the branch after that point.
+    target : optional (name, value): the branch ends where summary ``name`` reaches ``value`` (a force under
+        displacement control: force control), located by the same secant as the special points to
+        |summary - value| <= locate_tol max(|value|, 1) and reported as a special point of kind "target".
     stability, locate, locate_tol : the lowest eigenvalues at every point; special points located by secant
         to ``locate_tol`` relative width in p (folds: |dp/ds| below it).
     n_eigenvalues, tol, max_newton : eigenvalues per point, residual tolerance (as ``der.solve``), Newton
@@ -320,6 +325,11 @@ def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=
         if not callable(f) or name in ("s", parameter):
             raise ValueError(f"der.continuation: summaries[{name!r}] must be a function (scene, state) -> float "
                              f"with a name other than 's' and {parameter!r}")
+    if target is not None:
+        if not (isinstance(target, (tuple, list)) and len(target) == 2 and target[0] in summaries):
+            raise ValueError(f"der.continuation: target must be (name, value) with name one of the summaries "
+                             f"{sorted(summaries)}; got {target!r}")
+        target = (target[0], validate.finite_number(target[1], "der.continuation: target value"))
     if stop is not None and not callable(stop):
         raise TypeError(f"der.continuation: stop must be a function of a point (dict) or None; got {stop!r}")
     options = options or SolverOptions()
@@ -327,7 +337,7 @@ def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=
         raise TypeError(f"der.continuation: options must be a der.SolverOptions; got {type(options).__name__}")
     settings = dict(scene_of=scene_of, parameter=parameter, bounds=(lo, hi), ds=float(ds), ds_min=float(ds_min),
                     ds_max=float(ds_max), p_scale=p_scale, max_steps=max_steps, time_budget=float(time_budget),
-                    method=method, summaries=summaries, stop=stop, stability=bool(stability), locate=bool(locate),
+                    method=method, summaries=summaries, stop=stop, target=target, stability=bool(stability), locate=bool(locate),
                     locate_tol=float(locate_tol), n_eigenvalues=n_eigenvalues, tol=float(tol),
                     max_newton=max_newton, keep_states=bool(keep_states), progress=progress, options=options,
                     dp=None if dp is None else float(dp), predictor=predictor, perturb=perturb,
@@ -363,6 +373,7 @@ class _Problem:
         self.n = None
         self.weights = None
         self.sparse_factorisations = 0
+        self.rp_evaluations = 0
 
     def scene(self, p):
         scene = self.scene_of(float(p))
@@ -569,6 +580,11 @@ class _Problem:
         res_prev = math.inf
         updates = newton = 0
         last_g, just_updated = None, False
+        # dR/dp (two scenes and systems at p +- h: the costly part of a step when scene_of builds constraints) is
+        # computed at the corrector's first iterate and kept while Newton converges fast (the residual falls by
+        # RP_REUSE_RATE or more per step); the bordered step stays exact to first order, and the tangent at the
+        # converged point is always computed afresh (Problem.tangent)
+        Rp_kept = None
         # Newton's method on the bordered system. An inextensible rod's multipliers are updated as der.solve does
         # (augmented Lagrangian: near equilibrium, when the stretch is above its tolerance; the penalty grows
         # where the update does not shrink it), and Newton goes on from there with its own count and its own
@@ -585,11 +601,14 @@ class _Problem:
                 last_g = multiplier_update(self.system(p), state, last_g if res < 1e-4 else None)
                 updates += 1
                 newton, res_prev, just_updated = 0, math.inf, True
+                Rp_kept = None
                 continue
             just_updated = False
             if newton == max_newton or (newton >= 3 and res > 0.5 * res_prev) or res > 1e3 * max(res_prev, 1e-3):
                 return None
             newton += 1
+            if res > RP_REUSE_RATE * res_prev:
+                Rp_kept = None
             res_prev = res
             fac = self.factor(p, state)
             if fac is None:
@@ -598,7 +617,10 @@ class _Problem:
             if fixed_p:
                 dq, dp = self.solve(fac, R), 0.0
             else:
-                Rp, dqf = self.dR_dp(p, state)
+                if Rp_kept is None:
+                    Rp_kept = self.dR_dp(p, state)
+                    self.rp_evaluations += 1
+                Rp, dqf = Rp_kept
                 ab = self.solve(fac, np.stack([R, Rp], axis=1))
                 a, b = ab[:, 0], ab[:, 1]
                 held, dep = held_dofs(sys_)
@@ -773,7 +795,7 @@ def _point(problem, settings, state, p, s, dp_ds, residual, iterations):
     from .solvers import check_stability
 
     parameter = settings["parameter"]
-    scene = problem.scene(p)
+    scene = problem.system(p).scene       # the scene the corrector used (cached with its system): no new scene_of
     row = {parameter: float(p), "s": float(s), "dp_ds": float(dp_ds)}
     for name, f in settings["summaries"].items():
         row[name] = float(f(scene, state))
@@ -845,11 +867,15 @@ def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_re
                 x_pred = x + (dp / abs(t[-1])) * t
                 # (a bound reached up to rounding counts as reached: no sliver of a last step)
                 landing = x_pred[-1] > hi - 1e-9 * dp_max if t[-1] > 0 else x_pred[-1] < lo + 1e-9 * dp_max
+                bound = hi if t[-1] > 0 else lo
             else:
                 x_pred = x + ds * t
-                landing = not (lo <= x_pred[-1] <= hi)
+                # (and one that would stop short of a bound by less than a tenth of its own length in p lands on
+                # it now: not one more corrector and tangent for a sliver of a step)
+                to_bound = min(abs(hi - x_pred[-1]), abs(x_pred[-1] - lo))
+                landing = not (lo <= x_pred[-1] <= hi) or (t[-1] != 0 and to_bound < 0.1 * abs(ds * t[-1]))
+                bound = hi if abs(hi - x_pred[-1]) <= abs(x_pred[-1] - lo) else lo
             if landing and t[-1] != 0:
-                bound = hi if t[-1] > 0 else lo
                 x_pred = x + (bound - p) / t[-1] * t
                 x_pred[-1] = bound
             t_step = time.perf_counter()
@@ -894,6 +920,11 @@ def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_re
             if settings["locate"] and not natural and not (along and len(branch.points) == 2):
                 # (a switched branch starts at the special point itself: its first step is not a crossing)
                 _detect(problem, settings, branch, prev_row, row, prev_state, prev_p, prev_t, ds)
+            target = settings.get("target")
+            if target is not None and (prev_row[target[0]] - target[1]) * (row[target[0]] - target[1]) <= 0:
+                _detect(problem, settings, branch, prev_row, row, prev_state, prev_p, prev_t, ds, target=target)
+                status, message = "completed", f"{target[0]} reached {target[1]:.8g}"
+                break
             if landing:
                 status, message = "completed", f"{parameter} reached the bound {p:.8g}"
                 break
@@ -970,20 +1001,24 @@ def _tangent_of(problem, new_state, new_p, state, p, t, natural):
     return d / n if n > 0 else None
 
 
-def _detect(problem, settings, branch, a, b, state_a, p_a, t_a, ds):
-    """Locate a fold (dp/ds changes sign) or a change of stability between consecutive points a and b."""
+def _detect(problem, settings, branch, a, b, state_a, p_a, t_a, ds, target=None):
+    """Locate a fold (dp/ds changes sign) or a change of stability between consecutive points a and b (or, with
+    ``target`` = (summary name, value), where that summary reaches the value)."""
     parameter = settings["parameter"]
-    fold = a["dp_ds"] * b["dp_ds"] < 0
-    stab = settings["stability"] and a["stable"] != b["stable"]
-    if not (fold or stab):
-        return
-    kind = "fold" if fold else ("hopf" if (b["_crossing_complex"] or a["_crossing_complex"]) else "bifurcation")
-    key = "dp_ds" if fold else "min_eigenvalue"
+    if target is not None:
+        fold, kind, key, offset = False, "target", target[0], target[1]
+    else:
+        fold = a["dp_ds"] * b["dp_ds"] < 0
+        stab = settings["stability"] and a["stable"] != b["stable"]
+        if not (fold or stab):
+            return
+        kind = "fold" if fold else ("hopf" if (b["_crossing_complex"] or a["_crossing_complex"]) else "bifurcation")
+        key, offset = ("dp_ds" if fold else "min_eigenvalue"), 0.0
     x_a = np.append(state_a.q, p_a)
     s_b = problem.norm(np.append(branch.states[-1].q, b[parameter]) - x_a)   # chord length of the step
     # Illinois (regula falsi) on the step length sigma in (0, s_b), from point a along its tangent
-    s0, g0, q0 = 0.0, a[key], a[parameter]
-    s1, g1, q1 = s_b, b[key], b[parameter]
+    s0, g0, q0 = 0.0, a[key] - offset, a[parameter]
+    s1, g1, q1 = s_b, b[key] - offset, b[parameter]
     best = None
     width = abs(q1 - q0)
     scale = max(abs(b[parameter]), problem.p_scale)
@@ -1000,8 +1035,8 @@ def _detect(problem, settings, branch, a, b, state_a, p_a, t_a, ds):
         if tt is None:
             break
         row = _point(problem, settings, st, pp, a["s"] + sigma, tt[-1], res, its)
-        g = row[key]
-        if best is None or abs(g) < abs(best[0][key]):
+        g = row[key] - offset
+        if best is None or abs(g) < abs(best[0][key] - offset):
             best = (row, st, tt)
         if g * g1 < 0:
             s0, g0, q0 = s1, g1, q1
@@ -1010,7 +1045,8 @@ def _detect(problem, settings, branch, a, b, state_a, p_a, t_a, ds):
         s1, g1, q1 = sigma, g, pp
         width = abs(q1 - q0)
         if g == 0 or (fold and abs(g) <= settings["locate_tol"]) or \
-                (not fold and width <= settings["locate_tol"] * scale):
+                (target is not None and abs(g) <= settings["locate_tol"] * max(abs(offset), 1.0)) or \
+                (target is None and not fold and width <= settings["locate_tol"] * scale):
             break
     if best is None:
         row, st, tt = b, branch.states[-1], None
@@ -1022,8 +1058,10 @@ def _detect(problem, settings, branch, a, b, state_a, p_a, t_a, ds):
     for k, v in row.items():
         if k not in sp and not k.startswith("_") and k not in ("newton_iterations",):
             sp[k] = v
-    sp["located_to"] = width if fold is False else abs(row["dp_ds"])
-    sp["located_by"] = ("secant on dp/ds (located_to: |dp/ds| there)" if fold else
+    sp["located_to"] = (abs(row[key] - offset) if target is not None else width if fold is False
+                        else abs(row["dp_ds"]))
+    sp["located_by"] = (f"secant on {key} - {offset:.8g} (located_to: |{key} - {offset:.8g}| there)"
+                        if target is not None else "secant on dp/ds (located_to: |dp/ds| there)" if fold else
                         "secant on the lowest eigenvalue (located_to: bracket width in the parameter)")
     if note:
         sp["note"] = note

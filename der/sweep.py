@@ -28,13 +28,17 @@ class SweepResult:
         "Type: message", when the point failed; None otherwise).
     task_seconds : the seconds each point took where it ran, and task_cpu_seconds the CPU seconds of the
         process that ran it over the same time (not part of the rows: the rows are the same on every run; on a
-        loaded machine CPU < wall says how much of a core the point got). wall_time : seconds for the whole sweep (without starting a local cluster);
+        loaded machine CPU < wall says how much of a core the point got), and task_thread_cpu_seconds the CPU
+        seconds of the thread that ran it (on a Dask worker, without its event loop's threads). wall_time : seconds for the whole sweep (without starting a local cluster);
         startup_time : seconds to start (or connect to) the cluster. workers : how many ran it (0: serial).
     """
 
-    def __init__(self, rows, task_seconds, wall_time, startup_time, workers, scheduler, task_cpu_seconds=None):
+    def __init__(self, rows, task_seconds, wall_time, startup_time, workers, scheduler, task_cpu_seconds=None,
+                 task_thread_cpu_seconds=None):
         self.rows, self.task_seconds = rows, task_seconds
         self.task_cpu_seconds = list(task_cpu_seconds) if task_cpu_seconds is not None else [None] * len(rows)
+        self.task_thread_cpu_seconds = (list(task_thread_cpu_seconds) if task_thread_cpu_seconds is not None
+                                        else [None] * len(rows))
         self.wall_time, self.startup_time, self.workers, self.scheduler = wall_time, startup_time, workers, scheduler
 
     def __len__(self):
@@ -128,7 +132,39 @@ def grid_points(grid):
 def run_point(function, point):
     """Run one point: (row, seconds, CPU seconds of this process). An exception becomes a row with ok False and
     its reason, never a raise."""
-    t0, c0 = time.perf_counter(), time.process_time()
+    row, seconds, cpu, _ = _run_point_timed(function, point)
+    return row, seconds, cpu
+
+
+# The local cluster der.sweep starts: no statistical profiler in the workers (a thread that samples every
+# thread's stack each 10 ms, competing for the GIL with the task) and no MALLOC_TRIM_THRESHOLD_ (Dask's nanny sets
+# it to 64 KiB before spawning a worker; glibc then returns freed memory at once, and every array of a few hundred
+# kB is a fresh mmap with its page faults). Measured on the phase diagram's tasks (tools/phase_diagram.py, docs/
+# continuation.md): with both, a task cost 31-37 % more CPU in a worker than serially; without, 2-16 %.
+LOCAL_CLUSTER_CONFIG = {"distributed.worker.profile.enabled": False,
+                        "distributed.nanny.pre-spawn-environ": {"MALLOC_TRIM_THRESHOLD_": None}}
+
+
+def local_cluster(workers, **kwargs):
+    """A dask.distributed LocalCluster of ``workers`` processes, one thread each, configured for CPU-bound
+    numba tasks (LOCAL_CLUSTER_CONFIG); the cluster der.sweep starts."""
+    import dask
+    from dask.distributed import LocalCluster
+
+    config = {}
+    for key, value in LOCAL_CLUSTER_CONFIG.items():
+        if isinstance(value, dict):    # merged into Dask's (which holds OMP_NUM_THREADS=1 and the like)
+            value = {**dask.config.get(key, {}), **value}
+        config[key] = value
+    with dask.config.set(config):
+        return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                            **kwargs)
+
+
+def _run_point_timed(function, point):
+    """run_point, plus the CPU seconds of the thread that ran it (the task alone, without the other threads of a
+    Dask worker: its event loop, heartbeats, memory monitor)."""
+    t0, c0, th0 = time.perf_counter(), time.process_time(), time.thread_time()
     row = dict(point)
     try:
         out = function(**point)
@@ -143,7 +179,7 @@ def run_point(function, point):
         row["ok"], row["error"] = True, None
     except Exception as exc:       # a failed point reports its reason and does not stop the sweep
         row["ok"], row["error"] = False, f"{type(exc).__name__}: {exc}"
-    return row, time.perf_counter() - t0, time.process_time() - c0
+    return row, time.perf_counter() - t0, time.process_time() - c0, time.thread_time() - th0
 
 
 def sweep(function, grid, *, scheduler=None, workers=2, progress=True, client=None):
@@ -155,7 +191,8 @@ def sweep(function, grid, *, scheduler=None, workers=2, progress=True, client=No
         der.continuation Branch, or a single value). It runs in a worker process: define it at module level.
     grid : {name: sequence} (Cartesian product, last name fastest) or a sequence of dicts.
     scheduler : address of a running Dask scheduler ("tcp://HOST:PORT"); None starts a local cluster of
-        ``workers`` processes (one thread each) for this sweep and closes it afterwards.
+        ``workers`` processes (one thread each, no profiler, no MALLOC_TRIM_THRESHOLD_: ``local_cluster``) for
+        this sweep and closes it afterwards.
     workers : local cluster size; 0 runs serially in this process without Dask.
     progress : a progress bar on stderr (tqdm if installed, otherwise a line per tenth of the points).
     client : an existing ``dask.distributed.Client`` to use instead (then ``scheduler`` and ``workers`` are
@@ -190,17 +227,18 @@ def sweep(function, grid, *, scheduler=None, workers=2, progress=True, client=No
     bar = _Progress(len(points), progress)
     if client is None and scheduler is None and workers == 0:
         t0 = time.perf_counter()
-        rows, secs, cpus = [], [], []
+        rows, secs, cpus, threads = [], [], [], []
         for p in points:
-            row, s, c = run_point(function, p)
+            row, s, c, th = _run_point_timed(function, p)
             rows.append(row)
             secs.append(s)
             cpus.append(c)
+            threads.append(th)
             bar.update()
         bar.close()
-        return SweepResult(rows, secs, time.perf_counter() - t0, 0.0, 0, None, cpus)
+        return SweepResult(rows, secs, time.perf_counter() - t0, 0.0, 0, None, cpus, threads)
     try:
-        from dask.distributed import Client, LocalCluster, as_completed
+        from dask.distributed import Client, as_completed
     except ImportError:
         raise ImportError("der.sweep on a cluster needs dask.distributed: pip install -e '.[sweep]' (or run "
                           "serially with workers=0)") from None
@@ -214,14 +252,13 @@ def sweep(function, grid, *, scheduler=None, workers=2, progress=True, client=No
             except OSError as exc:
                 raise OSError(f"der.sweep: cannot reach the Dask scheduler at {scheduler}: {exc}") from None
         else:
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None)
+            cluster = local_cluster(workers)
             client = Client(cluster)
     try:
         n_workers = len(client.scheduler_info().get("workers", {}))
         startup = time.perf_counter() - t0
         t1 = time.perf_counter()
-        futures = client.map(run_point, [function] * len(points), points, pure=False)
+        futures = client.map(_run_point_timed, [function] * len(points), points, pure=False)
         for _ in as_completed(futures):
             bar.update()
         bar.close()
@@ -232,8 +269,9 @@ def sweep(function, grid, *, scheduler=None, workers=2, progress=True, client=No
             client.close()
             if cluster is not None:
                 cluster.close()
-    return SweepResult([r for r, _, _ in out], [s for _, s, _ in out], wall, startup, n_workers,
-                       scheduler or ("local" if cluster is not None else "client"), [c for _, _, c in out])
+    return SweepResult([o[0] for o in out], [o[1] for o in out], wall, startup, n_workers,
+                       scheduler or ("local" if cluster is not None else "client"), [o[2] for o in out],
+                       [o[3] for o in out])
 
 
 class _Progress:
@@ -279,4 +317,4 @@ def _jsonable(value):
     return jsonable(value)
 
 
-__all__ = ["sweep", "SweepResult", "grid_points", "run_point"]
+__all__ = ["sweep", "SweepResult", "grid_points", "run_point", "local_cluster", "LOCAL_CLUSTER_CONFIG"]

@@ -6,7 +6,8 @@ elongation eta and overtwist phi. Two controls:
 * displacement (``--eta --phi``): both ends clamped on the deformed uniform helix (positions and frames); the
   axial force P and axial torque T are measured in the middle of the rod;
 * force (``--P0 --phi``): the axial force through the helix axis is prescribed with the winding held; eta is
-  found by a secant iteration on displacement-controlled solves (a load-controlled test machine).
+  found by der.continuation in eta (displacement control) up to where the measured force reaches P0, located
+  by its secant (a load-controlled test machine).
 
 Correct closed form (docs/derivations.md, "Helix winding"): a force along the axis has a binormal component,
 so F_t = P S1 (not P / S1 as in Eq. 78, S1 = t.e3), and P0 = P/(A2 omega0^2) = c sqrt(1+lam^2)/lam
@@ -128,18 +129,30 @@ def displacement_path(p, solver, rod, etas, phi):
 
 
 def force_control(p, solver, rod, P0, phi):
-    """Secant iteration on eta until the measured axial force equals P0 (the winding phi held)."""
+    """eta where the measured axial force equals P0 (the winding phi held): der.continuation in eta under
+    displacement control, from the closed form's eta, until the summary P0 reaches the target (located by the
+    continuation's secant to 1e-10 relative); the located state is handed to the scenario's solver (it converges
+    at once, and the run's verdict and recording see it)."""
     guess = cf.winding_eta(P0, phi, p.lam, p.A1)
     e0 = guess if np.isfinite(guess) else 1.0
-    e1 = e0 * (1 + 1e-3)
-    f0 = solve_at(p, solver, rod, e0, phi)[1]["P0"] - P0
-    for _ in range(30):
-        res, m = solve_at(p, solver, rod, e1, phi)
-        f1 = m["P0"] - P0
-        if abs(f1) <= 1e-10 * max(abs(P0), 1.0) or e1 == e0:
-            break
-        e0, e1, f0 = e1, e1 - f1 * (e1 - e0) / (f1 - f0), f1
-    return e1, res, m
+    em = float(cf.winding_eta_max(p.lam))
+
+    def scene_of(eta):
+        return der.Scene(rod, constraints=end_clamps(rod, eta, phi, p.lam))
+
+    start = solver.solve(scene_of(e0), state=deformed_state(rod, e0, phi, p.lam))
+    f0 = measure(rod, start.state, p.lam)["P0"]
+    branch = der.continuation(scene_of, e0, state=start.state, parameter="eta", bounds=(1e-3 * em, 0.999 * em),
+                              direction=1 if f0 < P0 else -1, ds=0.01, ds_max=0.1,
+                              summaries={"P0": lambda scene, st: measure(rod, st, p.lam)["P0"]}, target=("P0", P0),
+                              locate_tol=1e-10, stability=False, max_steps=100, progress=False)
+    hits = [sp for sp in branch.special if sp["kind"] == "target"]
+    if not hits:
+        raise RuntimeError(f"helix_winding: P0 = {P0} not reached from eta = {e0:.6g} ({branch.status}: "
+                           f"{branch.message})")
+    eta = hits[0]["eta"]
+    res = solver.solve(scene_of(eta), state=hits[0]["state"])
+    return eta, res, measure(rod, res.state, p.lam)
 
 
 def point(p, solver, rod):

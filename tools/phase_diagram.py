@@ -5,16 +5,19 @@ Each grid point (A = A1/A2, n) is one ``der.continuation`` of the planar ring in
 the first special point, located by secant to 1e-9: the fold m_t a0^2/A1 = 1 (A <= 4) or the two-wave
 bifurcation sqrt(3 (2A - 5))/(A - 1) (A > 4). Each A runs at n and 2n edges; the discretisation error is
 O(1/n^2), so the Richardson extrapolation (4 m(2n) - m(n)) / 3 is what is compared with the closed form. The
-grid runs through ``der.sweep`` twice -- serially and on a Dask cluster (a local one with ``--workers``, or the
-one at ``--scheduler``) -- and the two tables must agree bit for bit. A no-op sweep on the same cluster
+grid runs serially and on the other runs below, and every table must agree bit for bit with the serial one. A no-op sweep on the same cluster
 measures the per-task overhead.
 
     python tools/phase_diagram.py [--json] [--scheduler tcp://HOST:PORT] [--workers 2] [--n 32] [--count 16]
-                                  [--png docs/figures/phase_diagram.png] [--csv PATH] [--no-serial]
+                                  [--png docs/figures/phase_diagram.png] [--csv PATH] [--no-serial] [--no-plain]
+                                  [--no-local]
 
-Prints the serial and cluster runs side by side (wall, the tasks' CPU seconds, the cores each run obtained,
-speedup and the ideal one from the CPU obtained, per-task overhead). Last line with --json: {"points",
-"worst_boundary_error", "serial_s", "cluster_s", "workers", ...}.
+Runs the same grid serially, on --workers plain processes side by side (no Dask: the hardware's own cost of
+running them at once), on a local Dask cluster (der.sweep.local_cluster) and, with --scheduler, on the cluster
+at that address, and prints them side by side: wall, CPU per task (of the process, and of the task's thread),
+CPU against serial, the cores each run obtained, speedup and the ideal one from the CPU obtained, worker idle time
+per task. Last line with --json: {"points", "worst_boundary_error", "serial_s", "cluster_s" (the last cluster),
+"workers", "runs", ...}.
 """
 import argparse
 import json
@@ -144,52 +147,61 @@ def plot(path, table, rows, n):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", action="store_true", help="print one JSON object as the last line")
-    ap.add_argument("--scheduler", default=None, help="address of a running Dask scheduler (tcp://HOST:PORT); "
-                    "default: a local cluster of --workers processes")
+    ap.add_argument("--scheduler", default=None, help="address of a running Dask scheduler (tcp://HOST:PORT): "
+                    "the separately started cluster, run after the local one")
     ap.add_argument("--workers", type=int, default=2, help="local cluster size (default 2)")
     ap.add_argument("--n", type=int, default=32, help="coarse number of edges (the fine one is 2n; default 32)")
     ap.add_argument("--count", type=int, default=16, help="number of A1/A2 values (default 16)")
     ap.add_argument("--noop", type=int, default=200, help="no-op tasks for the overhead measurement (default 200)")
     ap.add_argument("--no-serial", action="store_true", help="skip the serial run (no bit-for-bit check)")
+    ap.add_argument("--no-plain", action="store_true", help="skip the run on --workers plain processes (no Dask)")
+    ap.add_argument("--no-local", action="store_true", help="skip the local cluster (with --scheduler)")
     ap.add_argument("--png", default=os.path.join(ROOT, "docs", "figures", "phase_diagram.png"))
     ap.add_argument("--csv", default=None, help="write the per-point table (CSV) here")
     args = ap.parse_args(argv)
-    if args.n < 8 or args.count < 2 or args.workers < 1 or args.noop < 0:
-        print("phase_diagram.py: invalid input: need --n >= 8, --count >= 2, --workers >= 1, --noop >= 0",
-              file=sys.stderr)
+    if args.n < 8 or args.count < 2 or args.workers < 1 or args.noop < 0 or (args.no_local and not args.scheduler):
+        print("phase_diagram.py: invalid input: need --n >= 8, --count >= 2, --workers >= 1, --noop >= 0, and "
+              "--scheduler with --no-local", file=sys.stderr)
         return 2
     grid = [{"A": A, "n": nn} for A in default_ratios(args.count) for nn in (args.n, 2 * args.n)]
     load_before = os.getloadavg()
     der.warmup()
-    serial = None
+    runs = []          # (label, SweepResult, noop SweepResult or None, startup seconds)
     if not args.no_serial:
-        serial = der.sweep(boundary, grid, workers=0, progress=True)
-    from dask.distributed import Client, LocalCluster
+        runs.append(("serial", der.sweep(boundary, grid, workers=0, progress=True), None, 0.0))
+    if not args.no_plain:
+        runs.append((f"{args.workers} plain processes (no Dask)", plain_processes(grid, args.workers), None, 0.0))
+    from dask.distributed import Client
 
-    t0 = time.perf_counter()
-    if args.scheduler:
-        client, cluster = Client(args.scheduler, timeout="20s"), None
-    else:
-        cluster = LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True, dashboard_address=None)
-        client = Client(cluster)
-    startup = time.perf_counter() - t0
-    try:
-        client.run(der.warmup)          # compile (or load from numba's cache) on every worker before timing
-        workers = len(client.scheduler_info()["workers"])
-        over = der.sweep(noop, {"i": list(range(args.noop))}, client=client, progress=False) if args.noop else None
-        clustered = der.sweep(boundary, grid, client=client, progress=True)
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-    identical = None if serial is None else strip(serial.rows) == strip(clustered.rows)
+    from der.sweep import local_cluster
+
+    targets = ([] if args.no_local else [("local", None)]) + ([("separate", args.scheduler)] if args.scheduler else [])
+    for kind, address in targets:
+        t0 = time.perf_counter()
+        cluster = None if address else local_cluster(args.workers)
+        client = Client(address, timeout="20s") if address else Client(cluster)
+        startup = time.perf_counter() - t0
+        try:
+            client.run(der.warmup)      # compile (or load from numba's cache) on every worker before timing
+            over = der.sweep(noop, {"i": list(range(args.noop))}, client=client, progress=False) if args.noop else None
+            res = der.sweep(boundary, grid, client=client, progress=True)
+            workers = len(client.scheduler_info()["workers"])
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+        runs.append((f"{kind} cluster ({address or 'LocalCluster'}, {workers} workers)", res, over, startup))
+    clustered = runs[-1][1]
+    serial = runs[0][1] if not args.no_serial else None
+    identical = None if serial is None else all(strip(serial.rows) == strip(r.rows) for _, r, _, _ in runs[1:])
     table = compare(clustered.rows, args.n)
     errors = [t["error"] for t in table if t.get("error") is not None]
     png = plot(args.png, table, clustered.rows, args.n)
     if args.csv:
         clustered.to_csv(args.csv)
+    workers = clustered.workers
     compute = float(sum(clustered.task_seconds))
-    timing = timings(serial, clustered, workers, over, args.noop, startup)
+    measured = [run_timing(label, r, over, startup, serial) for label, r, over, startup in runs]
     out = {
         "tool": "phase_diagram", "points": len(grid), "ratios": len(table), "n": [args.n, 2 * args.n],
         "worst_boundary_error": max(errors) if len(errors) == len(table) else None,
@@ -203,67 +215,91 @@ def main(argv=None):
         "speedup": None if serial is None else serial.wall_time / clustered.wall_time,
         "task_compute_s": compute,
         # what the cluster spends per task beyond the computation, with every worker busy
-        "overhead_per_task_s": (workers * clustered.wall_time - compute) / len(grid),
+        "overhead_per_task_s": (max(workers, 1) * clustered.wall_time - compute) / len(grid),
         "identical_to_serial": identical, "png": png,
-        **timing, "load_average": load_before + os.getloadavg(),
+        "runs": measured, "load_average": load_before + os.getloadavg(),
         "table": table,
     }
-    print(comparison_table(out))
+    print(comparison_table(measured, out["load_average"]))
     if args.json:
         print(json.dumps(_json(out), allow_nan=False))
     else:
         for t in table:
             print(f"A1/A2 = {t['A']:7.4g}: closed form {t['closed_form']:.6f}, der {t.get('mt_extrapolated')}, "
                   f"error {t.get('error')}")
-        print({k: v for k, v in out.items() if k not in ("table", "failed")})
+        print({k: v for k, v in out.items() if k not in ("table", "failed", "runs")})
     return 0 if (identical in (None, True) and not out["failed"]) else 1
 
 
-def timings(serial, clustered, workers, over, noop, startup):
-    """What the runs cost: wall, the tasks' summed wall and CPU seconds, CPU per task, the cores each run
-    obtained (CPU seconds / wall seconds: on a shared machine below 1 per process), and the speedups.
+def _plain_init():
+    der.warmup()
 
-    ideal_speedup_from_cpu = cluster cores obtained / serial cores obtained: the speedup the CPU the machine
-    gave each run allows if a task costs the same CPU on a worker as serially; the measured speedup is that
-    times serial CPU per task / cluster CPU per task (the CPU the cluster path adds to each task)."""
-    n = len(clustered.rows)
-    c_cpu = float(sum(c for c in clustered.task_cpu_seconds if c is not None))
-    out = {"cluster_task_wall_s": float(sum(clustered.task_seconds)), "cluster_task_cpu_s": c_cpu,
-           "cluster_cpu_per_task_s": c_cpu / n, "cluster_cores_used": c_cpu / clustered.wall_time,
-           "cluster_cpu_utilisation": c_cpu / (max(workers, 1) * clustered.wall_time),
-           "noop_task_s": None if over is None else over.wall_time / noop, "cluster_startup_s": startup}
+
+def plain_processes(grid, workers):
+    """The same points on ``workers`` plain processes side by side (concurrent.futures, spawned, no Dask): the
+    hardware's own cost of running that many at once (shared caches and memory bandwidth), against which Dask's
+    own overhead is told apart."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    from der.sweep import SweepResult, _run_point_timed
+
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"), initializer=_plain_init) as ex:
+        # start (and warm) every process before timing
+        list(ex.map(time.sleep, [0.2] * workers))
+        startup = time.perf_counter() - t0
+        t1 = time.perf_counter()
+        out = list(ex.map(_run_point_timed, [boundary] * len(grid), grid))
+        wall = time.perf_counter() - t1
+    return SweepResult([o[0] for o in out], [o[1] for o in out], wall, startup, workers, "processes",
+                       [o[2] for o in out], [o[3] for o in out])
+
+
+def run_timing(label, res, over, startup, serial):
+    """What a run cost: wall, the tasks' CPU seconds (of the process that ran each: a Dask worker's include its
+    event loop's threads; and of the task's own thread), the cores it obtained (CPU seconds / wall seconds: on a
+    shared machine below 1 per process), its speedup over the serial run, the ideal speedup from the CPU obtained
+    (its cores obtained / the serial run's: what the run would gain if a task cost the same CPU as serially) and
+    the worker idle time per task."""
+    n = len(res.rows)
+    cpu = float(sum(c for c in res.task_cpu_seconds if c is not None))
+    thread = float(sum(c for c in res.task_thread_cpu_seconds if c is not None))
+    workers = max(res.workers, 1)
+    out = {"run": label, "wall_s": res.wall_time, "task_cpu_s": cpu, "cpu_per_task_s": cpu / n,
+           "thread_cpu_per_task_s": thread / n, "cores_used": cpu / res.wall_time,
+           "idle_per_task_s": (workers * res.wall_time - float(sum(res.task_seconds))) / n if res.workers else 0.0,
+           "noop_task_s": None if over is None else over.wall_time / len(over.rows), "startup_s": startup}
     if serial is not None:
         s_cpu = float(sum(serial.task_cpu_seconds))
-        out.update({"serial_task_cpu_s": s_cpu, "serial_cpu_per_task_s": s_cpu / n,
-                    "serial_cores_used": s_cpu / serial.wall_time,
-                    "ideal_speedup_from_cpu": (c_cpu / clustered.wall_time) / (s_cpu / serial.wall_time),
-                    "ideal_speedup_idle": max(workers, 1) * s_cpu / c_cpu})
+        out.update({"speedup": serial.wall_time / res.wall_time, "cpu_vs_serial": cpu / s_cpu,
+                    "thread_cpu_vs_serial": thread / float(sum(serial.task_thread_cpu_seconds)),
+                    "ideal_speedup_from_cpu": (cpu / res.wall_time) / (s_cpu / serial.wall_time),
+                    "idle_machine_bound": workers * s_cpu / cpu})
     return out
 
 
-def comparison_table(out):
-    """The serial and cluster runs side by side (text)."""
-    rows = [("run", "wall s", "task CPU s (sum)", "CPU per task ms", "cores obtained", "speedup")]
-    if out.get("serial_s") is not None:
-        rows.append(("serial", f"{out['serial_s']:.2f}", f"{out['serial_task_cpu_s']:.2f}",
-                     f"{1e3 * out['serial_cpu_per_task_s']:.0f}", f"{out['serial_cores_used']:.2f}", "1"))
-    rows.append((f"cluster ({out['scheduler']}, {out['workers']} workers)", f"{out['cluster_s']:.2f}",
-                 f"{out['cluster_task_cpu_s']:.2f}", f"{1e3 * out['cluster_cpu_per_task_s']:.0f}",
-                 f"{out['cluster_cores_used']:.2f}",
-                 "-" if out.get("speedup") is None else f"{out['speedup']:.2f}"))
-    w = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+def comparison_table(runs, load):
+    """The runs side by side (text)."""
+    head = ("run", "wall s", "CPU/task ms", "thread CPU/task ms", "CPU vs serial", "cores obtained", "speedup",
+            "ideal from CPU obtained", "idle machine bound", "idle/task ms", "no-op ms", "start s")
+
+    def f(x, fmt):
+        return "-" if x is None else format(x, fmt)
+
+    rows = [head]
+    for r in runs:
+        rows.append((r["run"], f(r["wall_s"], ".2f"), f(1e3 * r["cpu_per_task_s"], ".0f"),
+                     f(1e3 * r["thread_cpu_per_task_s"], ".0f"), f(r.get("cpu_vs_serial"), ".3f"),
+                     f(r["cores_used"], ".2f"), f(r.get("speedup"), ".2f"), f(r.get("ideal_speedup_from_cpu"), ".2f"),
+                     f(r.get("idle_machine_bound"), ".2f"), f(1e3 * r["idle_per_task_s"], ".0f"),
+                     f(None if r["noop_task_s"] is None else 1e3 * r["noop_task_s"], ".1f"), f(r["startup_s"], ".2f")))
+    w = [max(len(r[i]) for r in rows) for i in range(len(head))]
     lines = ["| " + " | ".join(c.ljust(w[i]) for i, c in enumerate(r)) + " |" for r in rows]
     lines.insert(1, "|" + "|".join("-" * (x + 2) for x in w) + "|")
-    if out.get("ideal_speedup_from_cpu") is not None:
-        lines.append(f"ideal speedup from the CPU obtained {out['ideal_speedup_from_cpu']:.2f} (measured "
-                     f"{out['speedup']:.2f}); on an idle machine at most {out['ideal_speedup_idle']:.2f}")
-    noop = out.get("noop_task_s")
-    lines.append(f"worker idle time per task {1e3 * out['overhead_per_task_s']:.1f} ms (Dask's overhead and the "
-                 "tail where one worker has no task left)"
-                 + (f", no-op task round trip {1e3 * noop:.1f} ms" if noop else "")
-                 + f"; cluster start/connect {out['cluster_startup_s']:.2f} s; load average "
-                   f"{', '.join(f'{x:.1f}' for x in out['load_average'][:3])} before, "
-                   f"{', '.join(f'{x:.1f}' for x in out['load_average'][3:])} after")
+    lines.append("CPU/task: time.process_time of the process that ran the task (a Dask worker's include its event "
+                 "loop's threads); thread CPU: the task's own thread. Load average "
+                 f"{', '.join(f'{x:.1f}' for x in load[:3])} before, {', '.join(f'{x:.1f}' for x in load[3:])} after")
     return "\n".join(lines)
 
 

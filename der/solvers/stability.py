@@ -42,11 +42,18 @@ from the size of an eigenvalue:
   (x_{k+1} - x_{k-1}) / 2 per edge of sliding, and each material frame follows the material, theta_j by
   the material twist rate (m_j + m_{j+1}) / 2. It is exact in the continuum; on the polygon it is a zero
   mode up to O(h^2) (the polygon has only the discrete symmetry of relabelling), and is removed as one.
+  Left in, it is the lowest mode of a writhed ring and slightly negative (tests/test_stability.py,
+  test_writhed_ring_is_stable_once_material_sliding_is_removed: -1.2e-4 at n = 40). On an inextensible rod its
+  size also follows the stretch penalty's state (it stretches edges at O(h^2)), so it does not shrink like h^2
+  alone: -3.0e-4 at n = 80 after der.solve's penalty updates.
 
 Eigen-solvers
 -------------
-Small systems are solved densely (QZ on the projected pencil). Larger ones by ARPACK in shift-invert mode:
-every solve reuses one banded LU factorisation of K - sigma M (LAPACK dgbtrf/dgbtrs, O(n) per solve), the
+Small systems are solved densely (QZ on the projected pencil). Larger ones by ARPACK's Lanczos on the
+shift-invert operator in standard symmetric form, M^1/2 (K - sigma M)^-1 M^1/2 on the massive DOFs: every solve
+reuses one banded LDL^T factorisation of K - sigma M (no pivoting, O(n) per solve; accepted only if a test
+solve's backward error is at round-off level, else LAPACK's pivoted band LU), whose pivots also count the
+eigenvalues below sigma (Sylvester) for the stability verdict's inertia check; the
 projection of the symmetry modes applied by a Woodbury update of rank 2m (m symmetry modes), and the
 symmetry modes themselves moved to a large eigenvalue beta so they are never found. Every returned eigenpair
 is checked by its residual ||K v - lambda M v|| / (|lambda| ||M v||) evaluated from the assembled K.

@@ -170,9 +170,20 @@ def band_solve(ab, kl, ku, perm, rhs, overwrite=True):
 @njit(cache=True)
 def band_negative_pivots(ab, kl, ku, perm, shift, mass, fixed):
     """Number of negative eigenvalues of the symmetric matrix ``K - shift M`` (K in band storage, fixed DOFs
-    removed), by Sylvester's law of inertia on a banded LDL^T factorisation without pivoting.
+    removed), by Sylvester's law of inertia on a banded LDL^T factorisation without pivoting (``band_ldlt``).
 
     Returns -1 if a pivot is too small for the count to be trusted (then the caller falls back)."""
+    return band_ldlt(ab, kl, ku, perm, shift, mass, fixed, 1e-13)[2]
+
+
+@njit(cache=True)
+def band_ldlt(ab, kl, ku, perm, shift, mass, fixed, pivot_tol=1e-13):
+    """Banded LDL^T factorisation without pivoting of the symmetric part of ``K - shift M`` (K in band storage,
+    ``kl`` = ``ku`` = b; fixed DOFs replaced by identity rows), in band order. Returns ``(L, D, negatives)``:
+    ``L[i, s]`` = l_{i, i-s} (unit diagonal implied), the pivots D, and the number of negative pivots (= negative
+    eigenvalues, Sylvester), or -1 if a pivot is at most ``pivot_tol`` times the largest diagonal entry (an
+    ill-conditioned positive definite matrix has pivots far below 1e-13 of it: a caller that checks the factors'
+    backward error instead passes 0, refusing only a zero pivot). O(n b^2); solves by ``band_ldlt_solve``, O(n b)."""
     n = ab.shape[1]
     off = kl + ku
     b = kl
@@ -204,8 +215,8 @@ def band_negative_pivots(ab, kl, ku, perm, shift, mass, fixed):
         for s in range(1, min(b, k) + 1):
             j = k - s
             dk -= L[k, s] * L[k, s] * D[j]
-        if abs(dk) <= 1e-13 * scale:
-            return -1
+        if abs(dk) <= pivot_tol * scale or not np.isfinite(dk):
+            return L, D, -1
         D[k] = dk
         if dk < 0.0:
             negatives += 1
@@ -217,7 +228,71 @@ def band_negative_pivots(ab, kl, ku, perm, shift, mass, fixed):
                 if i - j <= b:
                     v -= L[i, i - j] * L[k, s] * D[j]
             L[i, s_ik] = v / dk
-    return negatives
+    return L, D, negatives
+
+
+def band_ldlt_solve(L, D, perm, rhs):
+    """x with L D L^T x = rhs (factors of ``band_ldlt``), ``rhs`` (n,) or (n, k) in original DOF order."""
+    rhs = np.asarray(rhs, dtype=float)
+    if rhs.ndim == 1:
+        return _band_ldlt_solve1(L, D, perm, rhs)
+    return _band_ldlt_solve(L, D, perm, np.ascontiguousarray(rhs))
+
+
+@njit(cache=True)
+def _band_ldlt_solve1(L, D, perm, rhs):
+    n, b1 = L.shape
+    b = b1 - 1
+    y = np.empty(n)
+    for d in range(n):
+        y[perm[d]] = rhs[d]
+    for k in range(n):                       # L y = rhs
+        acc = y[k]
+        for s in range(1, min(b, k) + 1):
+            acc -= L[k, s] * y[k - s]
+        y[k] = acc
+    for k in range(n):                       # D z = y
+        y[k] /= D[k]
+    for k in range(n - 1, -1, -1):           # L^T x = z
+        acc = y[k]
+        for s in range(1, min(b, n - 1 - k) + 1):
+            acc -= L[k + s, s] * y[k + s]
+        y[k] = acc
+    out = np.empty(n)
+    for d in range(n):
+        out[d] = y[perm[d]]
+    return out
+
+
+@njit(cache=True)
+def _band_ldlt_solve(L, D, perm, r2):
+    n, b1 = L.shape
+    b = b1 - 1
+    m = r2.shape[1]
+    y = np.empty((n, m))
+    for d in range(n):
+        for c in range(m):
+            y[perm[d], c] = r2[d, c]
+    for k in range(n):                       # L y = rhs
+        for s in range(1, min(b, k) + 1):
+            l = L[k, s]
+            if l != 0.0:
+                for c in range(m):
+                    y[k, c] -= l * y[k - s, c]
+    for k in range(n):                       # D z = y
+        for c in range(m):
+            y[k, c] /= D[k]
+    for k in range(n - 1, -1, -1):           # L^T x = z
+        for s in range(1, min(b, n - 1 - k) + 1):
+            l = L[k + s, s]
+            if l != 0.0:
+                for c in range(m):
+                    y[k, c] -= l * y[k + s, c]
+    out = np.empty((n, m))
+    for d in range(n):
+        for c in range(m):
+            out[d, c] = y[perm[d], c]
+    return out
 
 
 class BandLU:

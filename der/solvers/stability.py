@@ -42,11 +42,18 @@ from the size of an eigenvalue:
   (x_{k+1} - x_{k-1}) / 2 per edge of sliding, and each material frame follows the material, theta_j by
   the material twist rate (m_j + m_{j+1}) / 2. It is exact in the continuum; on the polygon it is a zero
   mode up to O(h^2) (the polygon has only the discrete symmetry of relabelling), and is removed as one.
+  Left in, it is the lowest mode of a writhed ring and slightly negative (tests/test_stability.py,
+  test_writhed_ring_is_stable_once_material_sliding_is_removed: -1.2e-4 at n = 40). On an inextensible rod its
+  size also follows the stretch penalty's state (it stretches edges at O(h^2)), so it does not shrink like h^2
+  alone: -3.0e-4 at n = 80 after der.solve's penalty updates.
 
 Eigen-solvers
 -------------
-Small systems are solved densely (QZ on the projected pencil). Larger ones by ARPACK in shift-invert mode:
-every solve reuses one banded LU factorisation of K - sigma M (LAPACK dgbtrf/dgbtrs, O(n) per solve), the
+Small systems are solved densely (QZ on the projected pencil). Larger ones by ARPACK's Lanczos on the
+shift-invert operator in standard symmetric form, M^1/2 (K - sigma M)^-1 M^1/2 on the massive DOFs: every solve
+reuses one banded LDL^T factorisation of K - sigma M (no pivoting, O(n) per solve; accepted only if a test
+solve's backward error is at round-off level, else LAPACK's pivoted band LU), whose pivots also count the
+eigenvalues below sigma (Sylvester) for the stability verdict's inertia check; the
 projection of the symmetry modes applied by a Woodbury update of rank 2m (m symmetry modes), and the
 symmetry modes themselves moved to a large eigenvalue beta so they are never found. Every returned eigenpair
 is checked by its residual ||K v - lambda M v|| / (|lambda| ||M v||) evaluated from the assembled K.
@@ -63,7 +70,9 @@ import time
 
 import numpy as np
 
-from ..linalg import BandLU, add_diagonal, band_negative_pivots, band_to_sparse, constrain_band
+from ..linalg import (BandLU, add_diagonal, band_ldlt, band_ldlt_solve, band_matvec, band_negative_pivots,
+                      band_to_sparse,
+                      constrain_band)
 from ..loads import DistributedForce, EndForce, EndTorque, PointForce, TwistingMoment
 from .system import condense_system_band, evaluate_system, rotational_inertia
 
@@ -262,19 +271,16 @@ def lowest_modes(system, state, n_eigenvalues=6, dense_max=DENSE_MAX_DOFS):
            "n_symmetry": 0, "symmetric": True, "n_free": n, "method": "none", "scale": 1.0}
     if n == 0:
         return out
-    K = band_to_sparse(system.ab, system.kl, system.ku, system.perm).tocsr()
-    if getattr(system, "contact_coo", None):        # contact (issue 14): the off-band barrier Hessian
-        import scipy.sparse as sp
-
-        for r, c, v in system.contact_coo:
-            K = K + sp.csr_matrix((v, (r, c)), shape=K.shape)
-    K = K.tocsr()[idx][:, idx]
     m = mass[idx]
-    k_abs = abs(K)
     massive = m > 0
-    scale = float((k_abs @ np.ones(n))[massive].max() / m[massive].min()) if massive.any() else 1.0
-    kmax = abs(K).max()
-    symmetric = bool(abs(K - K.T).max() <= 1e-10 * max(kmax, 1e-300))
+    if getattr(system, "contact_coo", None) or system.kl != system.ku:
+        # contact (issue 14): the off-band barrier Hessian joins the band; a sparse matrix on the free DOFs
+        K = _sparse_free(system, idx)
+    else:
+        K = _BandOperator(system, idx)     # the band itself: no sparse copy (O(n) products, numba)
+    k_abs_rows = K.abs_dot(np.ones(n))
+    scale = float(k_abs_rows[massive].max() / m[massive].min()) if massive.any() else 1.0
+    symmetric = K.symmetric()
     Vfull = symmetry_modes(system, state)
     V = np.array([v[idx] for v in Vfull]).T if Vfull else np.zeros((n, 0))
     V = _m_orthonormal(V, m) if V.shape[1] else V
@@ -288,8 +294,9 @@ def lowest_modes(system, state, n_eigenvalues=6, dense_max=DENSE_MAX_DOFS):
         ev, vec = _dense_lowest(K, m, V, symmetric, k)
         out["method"] = "dense"
     else:
-        ev, vec = _banded_lowest(system, K, idx, mass, m, V, k, symmetric, scale)
+        ev, vec, n_below, sigma = _banded_lowest(system, K, idx, mass, m, V, k, symmetric, scale)
         out["method"] = "banded shift-invert"
+        out["inertia"] = (n_below, sigma)
     order = np.argsort(ev.real)[:k]
     ev, vec = ev[order], vec[:, order]
     if symmetric:
@@ -303,12 +310,125 @@ def lowest_modes(system, state, n_eigenvalues=6, dense_max=DENSE_MAX_DOFS):
     # from rounding the stiffness entries (each entry of K is of order A1/h^3 while K v is of order lambda h
     # for a smooth mode: the floor grows like eps n^4 for the bending modes of a rod)
     av = np.abs(vec)
-    floor = np.finfo(float).eps * np.einsum("ij,ij->j", av, k_abs @ av) / np.maximum(
+    floor = np.finfo(float).eps * np.einsum("ij,ij->j", av, K.abs_dot(av)) / np.maximum(
         np.abs(np.einsum("ij,i,ij->j", vec.conj(), m, vec)), 1e-300)
     full = np.zeros((rod.n_dof, vec.shape[1]), dtype=vec.dtype)
     full[idx] = vec
     out.update(eigenvalues=ev, vectors=full, residuals=r / den, floors=floor)
     return out
+
+
+class _BandOperator:
+    """K on the free DOFs ``idx`` straight from the system's band (no sparse copy): products with K, K^T and
+    |K|, the symmetry test, a dense copy for small systems. Numpy over the kl + ku + 1 diagonals, O(n b)."""
+
+    def __init__(self, system, idx):
+        self.kl, self.ku = system.kl, system.ku
+        self.ab, self.perm, self.idx, self.n_full = system.ab, system.perm, idx, system.ab.shape[1]
+        # the kl + ku + 1 diagonals, contiguous (the band is stored column-major): diag[ku + d, j] = A[j + d, j]
+        self.diag = np.ascontiguousarray(system.ab[system.kl:2 * system.kl + system.ku + 1])
+        self.nb = self.diag.shape[1]
+        self.pos = system.perm[idx]          # band positions of the free DOFs
+        self.shape = (idx.size, idx.size)
+        self.transposed = False
+
+    @property
+    def T(self):
+        t = _BandOperator.__new__(_BandOperator)
+        t.__dict__.update(self.__dict__)
+        t.transposed = not self.transposed
+        return t
+
+    def _mul(self, x, absolute=False):
+        x = np.asarray(x)
+        xb = np.zeros((self.nb,) + x.shape[1:], dtype=np.result_type(x, float))
+        xb[self.pos] = np.abs(x) if absolute else x
+        y = np.zeros_like(xb)
+        nb = self.nb
+        for d in range(-self.ku, self.kl + 1):        # A[j + d, j] = diag[ku + d, j]
+            j0, j1 = max(0, -d), min(nb, nb - d)
+            a = self.diag[self.ku + d, j0:j1]
+            if absolute:
+                a = np.abs(a)
+            if x.ndim == 2:
+                a = a[:, None]
+            if self.transposed:
+                y[j0:j1] += a * xb[j0 + d:j1 + d]
+            else:
+                y[j0 + d:j1 + d] += a * xb[j0:j1]
+        return y[self.pos]
+
+    def _mul_numba(self, x, absolute):
+        if self.transposed:
+            return self._mul(x, absolute)
+        x = np.asarray(x, dtype=float)
+        cols = x.reshape(x.shape[0], -1)
+        out = np.empty_like(cols)
+        full = np.zeros(self.n_full)
+        res = np.empty(self.n_full)
+        for c in range(cols.shape[1]):
+            full[self.idx] = cols[:, c]
+            band_matvec(self.ab, self.kl, self.ku, self.perm, full, res, absolute)
+            out[:, c] = res[self.idx]
+        return out.reshape(x.shape)
+
+    def __matmul__(self, x):
+        return self._mul_numba(x, False)
+
+    def abs_dot(self, x):
+        """|K| |x|."""
+        return self._mul_numba(x, True)
+
+    def symmetric(self):
+        freeb = np.zeros(self.nb, dtype=bool)
+        freeb[self.pos] = True
+        kmax = asym = 0.0
+        for d in range(0, self.kl + 1):
+            mask = freeb[:self.nb - d] & freeb[d:]
+            low = self.diag[self.ku + d, :self.nb - d][mask]     # A[j + d, j]
+            up = self.diag[self.ku - d, d:][mask]                # A[j, j + d]
+            if low.size:
+                kmax = max(kmax, np.abs(low).max(), np.abs(up).max())
+                asym = max(asym, np.abs(low - up).max())
+        return bool(asym <= 1e-10 * max(kmax, 1e-300))
+
+    def toarray(self):
+        return self._mul(np.eye(self.shape[0]))
+
+
+class _SparseOperator:
+    """K on the free DOFs as a scipy sparse matrix (contact: band plus the off-band barrier Hessian)."""
+
+    def __init__(self, K):
+        self.sparse = K.tocsr()
+        self.shape = K.shape
+
+    @property
+    def T(self):
+        return _SparseOperator(self.sparse.T)
+
+    def __matmul__(self, x):
+        return self.sparse @ x
+
+    def abs_dot(self, x):
+        return abs(self.sparse) @ np.abs(x)
+
+    def symmetric(self):
+        kmax = abs(self.sparse).max() if self.sparse.nnz else 0.0
+        return bool(abs(self.sparse - self.sparse.T).max() <= 1e-10 * max(kmax, 1e-300))
+
+    def toarray(self):
+        return self.sparse.toarray()
+
+
+def _sparse_free(system, idx):
+    K = band_to_sparse(system.ab, system.kl, system.ku, system.perm).tocsr()
+    if getattr(system, "contact_coo", None):        # contact (issue 14): the off-band barrier Hessian
+        import scipy.sparse as sp
+
+        for r, c, v in system.contact_coo:
+            K = K + sp.csr_matrix((v, (r, c)), shape=K.shape)
+    return _SparseOperator(K.tocsr()[idx][:, idx])
 
 
 def _project(X, V, m):
@@ -379,25 +499,53 @@ def _banded_lowest(system, K, idx, mass, m, V, k, symmetric, scale):
     # leaves K - sigma M regular; the eigenvalues nearest it are the lowest and any negative ones near zero
     bend_scale = rod.bending_scale / (rod.rho_A * rod.length ** 4)
     sigma = -1e-3 * bend_scale
-    ab = system.ab.copy(order="F")
-    add_diagonal(ab, system.kl, system.ku, system.perm, mass, -sigma)
-    constrain_band(ab, system.kl, system.ku, system.perm, ~_free_full(system), 1.0)
     full = np.zeros(rod.n_dof)
-    if getattr(system, "contact_coo", None):
+    n_below = -1           # eigenvalues below sigma by inertia (-1: not counted)
+    if isinstance(K, _SparseOperator):
         # contact couples DOFs off the band: factorise the sparse K - sigma M on the free DOFs instead
-        sparse_lu = spla.splu((K - sigma * sp.diags(m)).tocsc())
+        sparse_lu = spla.splu((K.sparse - sigma * sp.diags(m)).tocsc())
 
         def solve_b(b):
             return sparse_lu.solve(np.asarray(b, float))
     else:
-        lu = BandLU(ab, system.kl, system.ku, system.perm)
+        fixed_full = ~_free_full(system)
+        ldl = None
+        if symmetric:
+            # one banded LDL^T of K - sigma M (no pivoting) serves both the shift-invert solves and the inertia
+            # count (Sylvester); it is refused (negatives = -1) on a pivot too small to trust, then LU below
+            L, D, neg = band_ldlt(system.ab, system.kl, system.ku, system.perm, sigma, mass, fixed_full, 0.0)
+            if neg >= 0:
+                # without pivoting an indefinite matrix may grow its factors: accept them only if a solve's
+                # backward error is at round-off level (else LU, which pivots)
+                b = np.random.default_rng(0).standard_normal(n)
+                full[:] = 0.0
+                full[idx] = b
+                x = band_ldlt_solve(L, D, system.perm, full)[idx]
+                r = np.abs(K @ x - sigma * m * x - b).max()
+                bound = (K.abs_dot(x) + abs(sigma) * m * np.abs(x) + np.abs(b)).max()
+                if np.isfinite(r) and r <= 1e-10 * bound:
+                    ldl, n_below = (L, D), int(neg)
+        if ldl is not None:
+            def solve_b(b):
+                full[:] = 0.0
+                if b.ndim == 2:
+                    fb = np.zeros((rod.n_dof, b.shape[1]))
+                    fb[idx] = b
+                    return band_ldlt_solve(ldl[0], ldl[1], system.perm, fb)[idx]
+                full[idx] = b
+                return band_ldlt_solve(ldl[0], ldl[1], system.perm, full)[idx]
+        else:
+            ab = system.ab.copy(order="F")
+            add_diagonal(ab, system.kl, system.ku, system.perm, mass, -sigma)
+            constrain_band(ab, system.kl, system.ku, system.perm, fixed_full, 1.0)
+            lu = BandLU(ab, system.kl, system.ku, system.perm)
 
-        def solve_b(b):
-            if b.ndim == 2:
-                return np.column_stack([solve_b(b[:, j]) for j in range(b.shape[1])])
-            full[:] = 0.0
-            full[idx] = b
-            return lu.solve(full)[idx]
+            def solve_b(b):
+                if b.ndim == 2:
+                    return np.column_stack([solve_b(b[:, j]) for j in range(b.shape[1])])
+                full[:] = 0.0
+                full[idx] = b
+                return lu.solve(full)[idx]
 
     Mdiag = sp.diags(m)
     if V.shape[1]:
@@ -425,15 +573,37 @@ def _banded_lowest(system, K, idx, mass, m, V, k, symmetric, scale):
         A = spla.LinearOperator((n, n), matvec=amat, dtype=float)
     else:
         op = solve_b
-        A = K
+        A = spla.LinearOperator((n, n), matvec=lambda x: K @ x, dtype=float)
     OPinv = spla.LinearOperator((n, n), matvec=op, dtype=float)
     kk = min(k, n - 2)
     ncv = min(n - 1, max(2 * kk + 1, 12))   # the inverted spectrum decays fast: few Lanczos vectors
-    if symmetric:
+    massive = m > 0
+    n_m = int(massive.sum())
+    if symmetric and n_m > kk + 1:
+        # the standard symmetric form of shift-invert: C = M^1/2 (K - sigma M)^-1 M^1/2 on the massive DOFs
+        # (massless ones drop out: infinite eigenvalues), mu = 1 / (lambda - sigma), x = (K - sigma M)^-1
+        # M^1/2 y / mu. Lanczos in the plain inner product: one solve per step and no M products (ARPACK's
+        # generalized mode asks for three times as many reverse-communication calls)
+        root = np.sqrt(m[massive])
+        lift = np.zeros(n)
+
+        def c_mat(y):
+            lift[massive] = root * y
+            return root * op(lift)[massive]
+
+        C = spla.LinearOperator((n_m, n_m), matvec=c_mat, dtype=float)
+        mu, y = spla.eigsh(C, k=kk, which="LM", ncv=min(n_m - 1, ncv))
+        keep = mu != 0.0
+        mu, y = mu[keep], y[:, keep]
+        lifted = np.zeros((n, y.shape[1]))
+        lifted[massive] = root[:, None] * y
+        vec = op(lifted) / mu[None, :]
+        ev = sigma + 1.0 / mu
+    elif symmetric:
         ev, vec = spla.eigsh(A, k=kk, M=Mdiag, sigma=sigma, which="LM", OPinv=OPinv, ncv=ncv)
     else:
         ev, vec = spla.eigs(A, k=kk, M=Mdiag, sigma=sigma, which="LM", OPinv=OPinv, ncv=ncv)
-    return ev, vec
+    return ev, vec, n_below, sigma
 
 
 def _free_full(system):
@@ -473,11 +643,17 @@ def stability(system, result, n_eigenvalues=6):
     lam_min = float(ev.real[0])
     if symmetric and out["method"] != "dense":
         # shift-invert finds the eigenvalues nearest sigma: count all negative ones (below the floor) by
-        # inertia as a check
-        shift = -max(float(out["floors"].max()),
-                     1e-3 * system.rod.bending_scale / (system.rod.rho_A * system.rod.length ** 4))
-        n_neg = band_negative_pivots(system.ab, system.kl, system.ku, system.perm, shift, eigen_mass(system.rod),
-                                     ~_free_full(system))
+        # inertia as a check -- from the LDL^T factors of K - sigma M the eigen-solver used when it had them
+        n_below, sigma = out.get("inertia", (-1, 0.0))
+        floor_shift = -max(float(out["floors"].max()),
+                           1e-3 * system.rod.bending_scale / (system.rod.rho_A * system.rod.length ** 4))
+        shift, n_neg = sigma, n_below
+        if n_neg < 0 or n_neg > int(np.sum(ev.real < sigma)):
+            # not counted, or more below sigma than found: count below the round-off floor instead (round-off
+            # can put eigenvalues between -floor and sigma at very large n)
+            shift = floor_shift
+            n_neg = band_negative_pivots(system.ab, system.kl, system.ku, system.perm, shift,
+                                         eigen_mass(system.rod), ~_free_full(system))
         found = int(np.sum(ev.real < shift))
         if n_neg > found:
             notes.append(f"{n_neg} negative eigenvalues by inertia (the {found} nearest zero listed)")

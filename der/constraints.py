@@ -464,8 +464,8 @@ def build_links(rod, constraints, state=None, pattern=None):
 
 
 LinkPattern = namedtuple("LinkPattern", ["support", "local", "pivots", "masters", "first", "slots", "normals"])
-LinkPattern.__doc__ = """How one end support's links are laid out (``build_links(..., pattern=[])``): its record, its six local
-DOFs, the local columns solved for (``pivots``, in the order of ``Links.dep`` from index ``first``) and the others
+LinkPattern.__doc__ = """How one end support's links are laid out (``build_links(..., pattern=[])``): its record,
+its six local DOFs, the local columns solved for (``pivots``, in the order of ``Links.dep`` from index ``first``) and the others
 (``masters``), ``slots[i, k]`` the index in the triplet arrays of (pivot i, master k) or -1 where the band forbids
 a coupling (an inner-node dependent on an outer-node master; None if the support's equations were dependent:
 no square system to re-solve), and ``normals`` the directions its centre is held along."""

@@ -285,8 +285,9 @@ def _table(report):
     if nm:
         for r in nm["runs"]:
             m = r.get("metrics", {})
-            print(f"pendulum, der newmark dt {r.get('dt', float('nan')):.4g}: period {m.get('period_error', float('nan')):.3e}"
-                  f" amplitude {m.get('amplitude_change', float('nan')):.2e} {'pass' if r.get('pass') else 'FAIL'}"
+            nan = float("nan")
+            print(f"pendulum, der newmark dt {r.get('dt', nan):.4g}: period {m.get('period_error', nan):.3e}"
+                  f" amplitude {m.get('amplitude_change', nan):.2e} {'pass' if r.get('pass') else 'FAIL'}"
                   f" (CPU {r['cpu']:.1f} s)")
         if nm["largest_passing"]:
             print(f"largest passing implicit step: {nm['largest_passing']['dt']:.4g} s")

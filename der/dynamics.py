@@ -426,7 +426,14 @@ class _Model:
 def support_layout(constraints):
     """What of the support records ``constraints`` fixes the links' layout -- their kinds, ends, nodes, edges and
     free directions, not their targets (rotations, positions): two lists with the same layout differ only in
-    where their supports are."""
+    where their supports are.
+
+    Example
+    -------
+    >>> import numpy as np, der
+    >>> der.dynamics.support_layout([der.clamp("end", rotation=np.eye(3))])
+    (('clamp', 'end', (), None),)
+    """
     from .constraints import Clamp, EndSupport, Pin
 
     out = []

@@ -19,6 +19,7 @@ from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from . import loads as _loads
 from . import validate as _v
@@ -83,10 +84,17 @@ class FixTheta:
     edge: int
 
 
+_EYE = np.eye(3)
+
+
 def _rotation_matrix(R, name):
     R = _v.finite_array(R, name, (3, 3), "a proper 3x3 rotation matrix (orthogonal, determinant +1), "
                                                "e.g. numpy.eye(3)")
-    if not np.allclose(R @ R.T, np.eye(3), atol=1e-9) or np.linalg.det(R) < 0:
+    # numpy.allclose(R R^T, I, atol=1e-9) and det R >= 0, cheaply (a clamp turned at every step of a simulation
+    # makes one of these per step)
+    (a, b, c), (d, e, f), (g, h, i) = R.tolist()
+    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    if not (np.abs(R @ R.T - _EYE) <= 1e-9 + 1e-5 * _EYE).all() or det < 0:
         raise ValueError(f"{name} must be a proper 3x3 rotation matrix (R R^T = I to 1e-9, det R = +1); got "
                          f"{np.array2string(R, precision=4)} with det {np.linalg.det(R):.4g} and "
                          f"|R R^T - I| = {np.abs(R @ R.T - np.eye(3)).max():.2g}")
@@ -381,10 +389,14 @@ def _eliminate(G, g, groups, tol=1e-10):
     return out
 
 
-def build_links(rod, constraints, state=None):
+def build_links(rod, constraints, state=None, pattern=None):
     """(fixed, links): the boolean mask of held state entries -- plain fixes and the dependents of end supports,
     the dummy theta of an open rod always -- and the ``Links`` of the end supports, at ``state`` (default: the
-    rest state; the solvers pass the prepared starting state, whose targets are applied)."""
+    rest state; the solvers pass the prepared starting state, whose targets are applied).
+
+    With a list ``pattern`` (moving supports, ``refresh_links``), every admissible (dependent, master) pair of an
+    end support is kept as a triplet, zero or not, and what ``refresh_links`` needs to recompute the links in
+    place at other positions is appended to ``pattern`` (one ``LinkPattern`` per end support)."""
     fixed = np.zeros(rod.n_dof, dtype=np.bool_)
     if not rod.closed:
         fixed[4 * rod.n_nodes - 1] = True
@@ -423,17 +435,157 @@ def build_links(rod, constraints, state=None):
             raise ValueError(f"der.pin on a node of the {end!r} end edge together with a support at that end: the "
                              "support already holds the end cross-section; drop the pin")
         G, g = _support_equations(supports[0], x[local[0] // 4], x[local[3] // 4], rigid_edge=rod.inextensible)
-        for col, value, coefs in _eliminate(G, g, ([0, 1, 2], [3, 4, 5])):
+        pivots = _eliminate(G, g, ([0, 1, 2], [3, 4, 5]))
+        cols = [col for col, _, _ in pivots]
+        masters = [k for k in range(6) if k not in cols]
+        slots = -np.ones((len(cols), len(masters)), np.int64)
+        first = len(dep)
+        for i, (col, value, coefs) in enumerate(pivots):
             d = int(local[col])
             fixed[d] = True
             dep.append(d)
             const.append(value)
-            tri.extend((d, int(local[c2]), a) for c2, a in coefs.items())
+            if pattern is None:
+                tri.extend((d, int(local[c2]), a) for c2, a in coefs.items())
+                continue
+            for k, m in enumerate(masters):     # every admissible pair (no inner dependent on an outer master)
+                if col < 3 or m >= 3:
+                    slots[i, k] = len(tri)
+                    tri.append((d, int(local[m]), coefs.get(m, 0.0)))
+        if pattern is not None:
+            pattern.append(LinkPattern(supports[0], local, np.array(cols, np.int64), np.array(masters, np.int64),
+                                       first, slots if len(cols) == G.shape[0] else None,
+                                       np.ascontiguousarray(_complement(supports[0].free_directions()))))
     if not dep:
         return fixed, NO_LINKS
     tri = np.array(tri, dtype=object).reshape(-1, 3)
     return fixed, Links(np.array(dep, np.int64), np.array(const, float), tri[:, 0].astype(np.int64),
                         tri[:, 1].astype(np.int64), tri[:, 2].astype(float))
+
+
+LinkPattern = namedtuple("LinkPattern", ["support", "local", "pivots", "masters", "first", "slots", "normals"])
+LinkPattern.__doc__ = """How one end support's links are laid out (``build_links(..., pattern=[])``): its record,
+its six local DOFs, the local columns solved for (``pivots``, in the order of ``Links.dep`` from index ``first``) and the others
+(``masters``), ``slots[i, k]`` the index in the triplet arrays of (pivot i, master k) or -1 where the band forbids
+a coupling (an inner-node dependent on an outer-node master; None if the support's equations were dependent:
+no square system to re-solve), and ``normals`` the directions its centre is held along."""
+
+
+@njit(cache=True)
+def relink_end(x_out, x_in, normals, clamp, rigid, pivots, masters, X):
+    """One end support's link values at the end edge (x_out, x_in), for the pivots (dependents) and masters of
+    its ``LinkPattern``: its equations G z = g (z = [x_out, x_in]; the centre held along ``normals``, and for a
+    ``clamp`` the end edge held along its direction t: b.(x_in - x_out) = 0 for two unit b normal to t, plus
+    t.(x_in - x_out) = |e| if ``rigid``) solved for the pivots, X = G_P^-1 [G_M | g] (Gaussian elimination with
+    partial pivoting; X has len(pivots) rows and len(masters) + 1 columns). The two b may be any orthonormal pair:
+    the reduced row echelon form for given pivots depends only on the equations' row space. False if G_P is
+    singular or the equation count differs from the pivot count."""
+    m = pivots.shape[0]
+    G = np.zeros((6, 6))
+    g = np.zeros(6)
+    r = 0
+    for k in range(normals.shape[0]):
+        s = 0.0
+        for a in range(3):
+            G[r, a] = 0.5 * normals[k, a]
+            G[r, 3 + a] = 0.5 * normals[k, a]
+            s += normals[k, a] * 0.5 * (x_out[a] + x_in[a])
+        g[r] = s
+        r += 1
+    if clamp:
+        e = x_in - x_out
+        length = np.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+        t = e / length
+        k = 0                                   # the axis t is least along: a = e_k
+        for a in range(1, 3):
+            if abs(t[a]) < abs(t[k]):
+                k = a
+        b1 = -t[k] * t
+        b1[k] += 1.0
+        b1 /= np.sqrt(b1[0] * b1[0] + b1[1] * b1[1] + b1[2] * b1[2])
+        b2 = np.array([t[1] * b1[2] - t[2] * b1[1], t[2] * b1[0] - t[0] * b1[2], t[0] * b1[1] - t[1] * b1[0]])
+        for b in (b1, b2):
+            for a in range(3):
+                G[r, a] = -b[a]
+                G[r, 3 + a] = b[a]
+            r += 1
+        if rigid:
+            for a in range(3):
+                G[r, a] = -t[a]
+                G[r, 3 + a] = t[a]
+            g[r] = length
+            r += 1
+    if r != m:
+        return False
+    nm = masters.shape[0]
+    A = np.zeros((m, m + nm + 1))
+    for i in range(m):
+        for j in range(m):
+            A[i, j] = G[i, pivots[j]]
+        for j in range(nm):
+            A[i, m + j] = G[i, masters[j]]
+        A[i, m + nm] = g[i]
+    scale = 0.0
+    for i in range(m):
+        for j in range(m):
+            scale = max(scale, abs(A[i, j]))
+    for c in range(m):
+        p = c
+        for i in range(c + 1, m):
+            if abs(A[i, c]) > abs(A[p, c]):
+                p = i
+        if not abs(A[p, c]) > 1e-12 * scale:
+            return False
+        if p != c:
+            for j in range(A.shape[1]):
+                A[c, j], A[p, j] = A[p, j], A[c, j]
+        piv = A[c, c]
+        for j in range(A.shape[1]):
+            A[c, j] /= piv
+        for i in range(m):
+            if i != c and A[i, c] != 0.0:
+                f = A[i, c]
+                for j in range(A.shape[1]):
+                    A[i, j] -= f * A[c, j]
+    for i in range(m):
+        for j in range(nm + 1):
+            X[i, j] = A[i, m + j]
+    return True
+
+
+def refresh_links(rod, links, patterns, constraints, q):
+    """Recompute the end supports' links in place (``links.const``, ``links.tri_coef``) at the positions ``q``
+    for the support records ``constraints`` (the same kinds, ends and free directions as when ``patterns`` was
+    built: only their targets moved), keeping the dependents and masters chosen then (``relink_end``). The
+    reduced row echelon form of a support's equations for given pivot columns depends only on the equations' row
+    space, so this is what ``build_links`` gives at ``q`` as long as it would choose the same pivots.
+
+    Returns False, touching nothing, when that choice no longer fits -- the pivots ill-conditioned (a coefficient
+    above 10: complete pivoting keeps them near 1) or a coupling the band forbids needed; the caller then builds
+    the links afresh (``build_links``)."""
+    x = q.reshape(-1, 4)[:, :3]
+    ends = [c for c in constraints if isinstance(c, END_SUPPORTS)]
+    if len(ends) != len(patterns):
+        return False
+    updates = []
+    for pat, c in zip(patterns, ends):
+        if pat.slots is None or pat.support.end != c.end:
+            return False
+        X = np.empty((pat.pivots.size, pat.masters.size + 1))
+        if not relink_end(x[pat.local[0] // 4], x[pat.local[3] // 4], pat.normals, isinstance(c, Clamp),
+                          rod.inextensible, pat.pivots, pat.masters, X):
+            return False
+        coef = -X[:, :-1]
+        if not np.isfinite(X).all() or np.abs(coef).max(initial=0.0) > 10.0:
+            return False
+        if np.abs(coef[pat.slots < 0]).max(initial=0.0) > 1e-12:
+            return False
+        updates.append((pat, X[:, -1], coef))
+    for pat, const, coef in updates:
+        links.const[pat.first:pat.first + const.size] = const
+        ok = pat.slots >= 0
+        links.tri_coef[pat.slots[ok]] = coef[ok]
+    return True
 
 
 def fixed_dofs(rod, constraints, state=None):

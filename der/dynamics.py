@@ -355,21 +355,38 @@ class _Model:
         if damping.rayleigh_mass:
             self.c_diag += damping.rayleigh_mass * mass
         self.drag = damping.normal > 0 or damping.tangential > 0
+        self.constraints = scene.constraints
+        self.support_key = support_layout(scene.constraints)
+        self.rebuilds = 0
 
     def set_time(self, t):
-        """Put the loads and supports of time t into the system (only if they depend on time)."""
+        """Put the loads and supports of time t into the system (only if they depend on time).
+
+        Supports: ``supports_at(t)``'s records become ``self.constraints`` (the targets the step applies with
+        ``move_supports``); nothing is rebuilt while they keep the kinds, ends and free directions of the
+        records at t = 0 -- only their rotations and positions move. A change of those (a support added,
+        released or turned into another kind) rebuilds the scene and the links (``self.rebuilds``). Loads:
+        ``loads_at(t)`` rebuilds the scene's load plan at every step."""
         from .scene import Scene, make_plan
         from .solvers.system import applied_scales
 
         sys_ = self.system
-        if self.loads_at is None and self.supports_at is None:
-            return
-        loads = self.scene.loads if self.loads_at is None else tuple(self.loads_at(t))
-        cons = self.scene.constraints if self.supports_at is None else tuple(self.supports_at(t))
-        scene_t = Scene(self.rod, energies=self.scene.energies, loads=loads, constraints=cons,
-                        contacts=self.scene.contacts)
-        sys_.scene = scene_t
+        if self.supports_at is not None:
+            cons = tuple(self.supports_at(t))
+            key = support_layout(cons)
+            if key != self.support_key:
+                sc = sys_.scene
+                sys_.scene = Scene(self.rod, energies=sc.energies, loads=sc.loads, constraints=cons,
+                                   contacts=sc.contacts)
+                sys_.link_patterns = None           # built afresh by the next move_supports
+                self.support_key = key
+                self.rebuilds += 1
+            self.constraints = cons
         if self.loads_at is not None:
+            sc = sys_.scene
+            scene_t = Scene(self.rod, energies=sc.energies, loads=tuple(self.loads_at(t)),
+                            constraints=sc.constraints, contacts=sc.contacts)
+            sys_.scene = scene_t
             k = sys_.plan.k_stretch
             sys_.plan = make_plan(scene_t, k)
             sys_.k_stretch = sys_.plan.k_stretch
@@ -404,6 +421,32 @@ class _Model:
             power += add_drag(state.q, v, self.rod.edge_nodes, self.node_w, d.normal, d.tangential,
                               self.rod.closed, F, ab, jac_scale, sys_.kl, sys_.ku, sys_.perm)
         return F, energy, power
+
+
+def support_layout(constraints):
+    """What of the support records ``constraints`` fixes the links' layout -- their kinds, ends, nodes, edges and
+    free directions, not their targets (rotations, positions): two lists with the same layout differ only in
+    where their supports are.
+
+    Example
+    -------
+    >>> import numpy as np, der
+    >>> der.dynamics.support_layout([der.clamp("end", rotation=np.eye(3))])
+    (('clamp', 'end', (), None),)
+    """
+    from .constraints import Clamp, EndSupport, Pin
+
+    out = []
+    for c in constraints:
+        if isinstance(c, Clamp):
+            out.append(("clamp", c.end, c.slide, c.direction))
+        elif isinstance(c, EndSupport):
+            out.append((c.kind, c.end, c.free))
+        elif isinstance(c, Pin):
+            out.append(("pin", c.node))
+        else:
+            out.append((type(c).__name__, getattr(c, "edge", None)))
+    return tuple(out)
 
 
 def _as_velocity(rod, velocity):
@@ -579,7 +622,7 @@ def simulate(scene, t_end, dt=None, integrator="newmark", state=None, velocity=N
                       contacts=scene.contacts)
 
     from .solvers import SolverOptions, _compile_first
-    from .solvers.system import build_system, prepare_state, update_links
+    from .solvers.system import build_system, prepare_state, start_moving_supports, update_links
 
     compile_time = _compile_first()
     compile_time += _compile_dynamics()
@@ -588,6 +631,8 @@ def simulate(scene, t_end, dt=None, integrator="newmark", state=None, velocity=N
     system.mass_full = mass.copy()
     work = prepare_state(system, state)       # targets of t = 0 applied; links and condensed mass from `mass`
     update_links(system, work)
+    if supports is not None:
+        start_moving_supports(system, work)   # laid out once: each step recomputes the links in place
     if system.terms:
         from .terms import warmup as _contact_warmup
 
@@ -682,6 +727,11 @@ def _compile_dynamics():
              np.arange(12, dtype=np.int64))
     add_friction(q, q, np.zeros((3, 3)), np.zeros(3), 0.1, 1.0, 1.0, np.zeros(12), np.zeros((0, 0)), 1, 1,
                  np.arange(12, dtype=np.int64))
+    from .constraints import relink_end
+
+    x = q.reshape(-1, 4)[:, :3]
+    relink_end(x[0], x[1], np.eye(3), True, False, np.arange(5, dtype=np.int64), np.array([5], dtype=np.int64),
+               np.empty((5, 2)))
     _DYNAMICS_COMPILED = True
     return time.perf_counter() - t0
 
@@ -855,7 +905,7 @@ class _NewmarkRun(_Run):
 
     def _step(self, t1):
         from .linalg import add_diagonal, band_solve
-        from .solvers.system import constrain_system, expand, prepare_state, residual_vector, transport
+        from .solvers.system import constrain_system, expand, move_supports, residual_vector, transport
         from .energies.stretch import elongations
 
         model, sysm, rod, dt = self.model, self.system, self.rod, self.dt
@@ -874,14 +924,13 @@ class _NewmarkRun(_Run):
             a = min([1.0] + [t.max_step(s0, step) for t in sysm.terms])
             q_pred = s0.q + 0.5 * a * step
         trial = s0.copy()
-        if not transport(sysm, s0, q_pred, trial):
-            return False, ("newton_failed", f"the predictor reversed an edge at t = {t1:g}; reduce dt")
         if model.supports_at is not None:
-            trial = prepare_state(sysm, trial)        # supports at t1 (targets, links)
-            # frames: transported from s0 (time-parallel) to the prepared positions
-            q_prep = trial.q.copy()
-            trial = s0.copy()
-            transport(sysm, s0, q_prep, trial)
+            # supports at t1: targets applied, links recomputed in place, frames transported from s0
+            moved = move_supports(sysm, s0, q_pred, trial, model.constraints)
+        else:
+            moved = transport(sysm, s0, q_pred, trial)
+        if not moved:
+            return False, ("newton_failed", f"the predictor reversed an edge at t = {t1:g}; reduce dt")
         trial.penalty = s0.penalty
         # d qdd1 / d q1 = (1 - am) / ((1 - af) beta dt^2); d v1 / d q1 = gamma / (beta dt)
         dacc = (1.0 - am) / ((1.0 - af) * bet * dt * dt)
@@ -1106,7 +1155,7 @@ class _VerletRun(_Run):
 
     def step(self, t1):
         from .solvers.projection import project_positions, project_velocity
-        from .solvers.system import prepare_state, transport
+        from .solvers.system import move_supports, transport
         from .constraints import enforce_links
 
         model, sysm, rod, dt = self.model, self.system, self.rod, self.dt
@@ -1116,10 +1165,9 @@ class _VerletRun(_Run):
         q1 = s0.q + dt * v_half
         if model.supports_at is not None:
             tmp = s0.copy()
-            tmp.q[:] = q1
-            tmp = prepare_state(sysm, tmp)
-            held_target = tmp.q.copy()
-            q1[self.held] = held_target[self.held]
+            if not move_supports(sysm, s0, q1, tmp, model.constraints):
+                return False, ("nonfinite", f"an edge reversed at t = {t1:g}; reduce dt")
+            q1[self.held] = tmp.q[self.held]
         if self.inext:
             for _ in range(3):
                 worst = project_positions(q1, rod.edge_nodes, rod.l_bar, self.w, rod.closed, 50, self.strain_tol)

@@ -427,3 +427,93 @@ def test_self_contact_in_dynamics_keeps_the_strands_apart_and_adds_no_energy():
     assert np.all(E <= E[0] * (1 + 1e-9))
     vy = traj.velocities.reshape(len(traj.times), -1, 4)[:, 0, 1]
     assert vy[0] < 0 < vy[-1]                            # the upper arm's tip came down and bounced back up
+
+
+def _axis_rotation(axis, a):
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
+
+
+def _tilted_clamp(t):
+    """An end clamp turned about an axis oblique to the rod (its end edge changes direction, so the links'
+    coefficients change at every step) while its centre moves."""
+    return [der.clamp("start"), der.clamp("end", rotation=_axis_rotation([1, 0.3, 0.2], 0.8 * t),
+                                          position=[0.1 * t, 0.05 * t * t, 1.0 - 0.1 * t])]
+
+
+# final positions of nodes 3 and 6 and angles recorded with the scene rebuilt at every step (commit c7c4f2b)
+MOVING_CLAMP_BEFORE = {
+    "newmark": (0.5, 0.01, [[-0.007932753857128792, 0.06539165250700794, 0.34133356737713055],
+                            [0.021058637661854722, 0.08167728174177134, 0.7542585101063116]],
+                [0.0, 0.015029389514021862, 0.028720732355474628, 0.04033855802382014, 0.04970356536890859,
+                 0.056660450501802725, 0.06302834557843764, 0.07525805663933349]),
+    "verlet": (0.05, 2e-4, [[-0.00015146485823339754, -0.0005030201172743623, 0.3547436498285163],
+                            [0.0025385594418360765, 0.0036157725318598215, 0.7814366011756344]],
+               [0.0, 6.77399726675213e-07, 5.266884307392464e-06, 6.432987659146242e-05, 0.0004793997899564375,
+                0.002119274387151039, 0.005098810680362617, 0.007525766962555469]),
+}
+
+
+@pytest.mark.parametrize("integrator", ["newmark", "verlet"])
+def test_moving_supports_update_in_place_without_rebuilding_the_scene(integrator, monkeypatch):
+    """A clamp turned about an oblique axis while its centre moves: the scene and the support links are built
+    once (the same number of builds for 5 steps as for all of them) and each step only recomputes the links'
+    numbers; the clamp follows its target (frame and centre) to round-off at every step and the trajectory is
+    the one of the old code, which rebuilt the scene and the links at every step."""
+    import der.scene
+    import der.solvers.system
+
+    rod = der.rod_from_shape(der.shapes.straight(1.0, 8, director=(1, 0, 0)), A1=1.0, A2=0.7, EA=1e3, rho_A=1.0,
+                             rho_J=1e-2)
+    t_end, dt, x_before, theta_before = MOVING_CLAMP_BEFORE[integrator]
+    builds = {"scene": 0, "links": 0}
+    post_init, build_links = der.scene.Scene.__post_init__, der.solvers.system.build_links
+
+    def count_scene(self):
+        builds["scene"] += 1
+        post_init(self)
+
+    def count_links(*args, **kwargs):
+        builds["links"] += 1
+        return build_links(*args, **kwargs)
+
+    der.simulate(der.Scene(rod), 2 * dt, dt=dt, integrator=integrator, supports=_tilted_clamp, progress=False)
+    monkeypatch.setattr(der.scene.Scene, "__post_init__", count_scene)
+    monkeypatch.setattr(der.solvers.system, "build_links", count_links)
+    off = []
+
+    def check(t, state, v):
+        x = state.positions
+        m1 = der.geometry.material_frames(state.q, der.geometry.tangents(state.q, rod.edge_nodes), state.d1)[0]
+        target = _tilted_clamp(t)[1]
+        off.append(max(np.abs(m1[-1] - target.rotation @ rod.rest_d1[-1]).max(),
+                       np.abs(0.5 * (x[-1] + x[-2]) - target.position).max()))
+
+    counts = []
+    for t in (5 * dt, t_end):
+        builds.update(scene=0, links=0)
+        traj = der.simulate(der.Scene(rod), t, dt=dt, integrator=integrator, supports=_tilted_clamp, callback=check,
+                            gravity=[0.3, 0, 0], progress=False)
+        assert traj.completed
+        counts.append(dict(builds))
+    assert counts[0] == counts[1], counts            # builds do not grow with the number of steps
+    assert counts[1]["scene"] <= 3 and counts[1]["links"] <= 4
+    assert max(off) < 1e-12
+    assert np.abs(traj.positions[-1][[3, 6]] - x_before).max() < 1e-11
+    assert np.abs(traj.thetas[-1] - theta_before).max() < 1e-11
+
+
+def test_a_support_that_changes_kind_mid_run_rebuilds_its_links():
+    """Supports whose layout changes (a clamp released to a hinge at t = 0.1) still work: the scene and links are
+    rebuilt at that step, and the end then turns freely (its frame leaves the clamp's)."""
+    rod = der.rod_from_shape(der.shapes.straight(1.0, 8, director=(1, 0, 0)), A1=1.0, A2=0.7, EA=1e3, rho_A=1.0,
+                             rho_J=1e-2)
+
+    def supports(t):
+        return [der.clamp("start"), der.clamp("end") if t < 0.1 else der.hinge("end")]
+
+    traj = der.simulate(der.Scene(rod), 0.3, dt=0.01, supports=supports, gravity=[1.0, 0, 0], progress=False)
+    assert traj.completed
+    tangent = traj.positions[-1][-1] - traj.positions[-1][-2]
+    assert abs(tangent[0]) > 1e-4 * np.linalg.norm(tangent)     # the hinged end edge tilted under gravity

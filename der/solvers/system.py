@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..constraints import NO_LINKS, apply_targets, build_links, enforce_links
+from ..constraints import NO_LINKS, apply_targets, build_links, enforce_links, refresh_links
 from ..diagnostics import _edge_forces
 from ..energies.stretch import elongations
 from ..geometry import edge_array, edge_frames, transport_frames
@@ -52,6 +52,8 @@ class System:
     links: object = NO_LINKS   # the end supports' dependents (constraints.Links): q = c + T y
     mass_full: np.ndarray = None   # lumped mass before condensation (``mass`` is T^T M T, lumped)
     parts = None                   # a scene of several rods: a MultiSystem (multi.py) has its rods' systems here
+    link_builds: int = 0           # times the end supports' links were built (build_system, update_links, ...)
+    link_patterns = None           # moving supports (dynamics): their links' layout (constraints.LinkPattern)
 
     @property
     def n_dof(self):
@@ -182,6 +184,7 @@ def build_system(scene, options):
     system = System(scene, rod, plan, fixed, ~fixed, kl, ku, perm, plan.k_stretch, weights, is_theta, mass, F_app,
                     M_app, np.zeros(n), np.zeros(n), new_band(n, kl, ku), links, mass.copy())
     system.mass = condensed_mass(system)
+    system.link_builds = 1
     system.k_initial = plan.k_stretch.copy()
     # contact terms (der/terms), bound for this solve; () for a scene without contact (nothing is imported)
     system.terms = tuple(term.bind(system) for term in scene.contacts)
@@ -203,6 +206,7 @@ def update_links(system, state):
     """Recompute the end supports' links (and the held mask and condensed mass) at the prepared ``state``
     (whose targets are applied): a clamp holds its end edge along its current direction."""
     fixed, links = build_links(system.rod, system.scene.constraints, state)
+    system.link_builds += 1
     system.fixed = fixed
     system.free = ~fixed
     system.links = links
@@ -693,13 +697,7 @@ def prepare_state(system, state):
     if not transport(system, base, work.q, work):
         raise ValueError("the prescribed constraint targets reverse an edge in one step; "
                          "move the clamp in smaller increments (continuation)")
-    for j, m1 in directors:
-        t = work.tangents[j]
-        d1 = work.d1[j]
-        d2 = np.cross(t, d1)
-        target = np.arctan2(m1 @ d2, m1 @ d1)
-        current = work.q[4 * j + 3]
-        work.q[4 * j + 3] = current + (target - current + np.pi) % (2 * np.pi) - np.pi
+    set_clamp_angles(work, directors)
     update_links(system, work)
     work.q_lo[system.fixed] = 0.0
     if system.links.dep.size:
@@ -708,6 +706,57 @@ def prepare_state(system, state):
         base = work.copy()
         transport(system, base, work.q, work)
     return work
+
+
+def set_clamp_angles(state, directors):
+    """Set theta of each clamped end edge so that its material director is the prescribed one: ``directors`` is
+    a list of (edge, m1 target) (``constraints.apply_targets``), the frames of ``state`` already transported to
+    its positions; the branch nearest the current theta is taken (an end turned a little at a time keeps count of
+    its full turns)."""
+    for j, m1 in directors:
+        (t0, t1, t2), (a0, a1, a2), (m0, m1_, m2) = state.tangents[j].tolist(), state.d1[j].tolist(), m1.tolist()
+        # d2 = t x d1
+        target = np.arctan2(m0 * (t1 * a2 - t2 * a1) + m1_ * (t2 * a0 - t0 * a2) + m2 * (t0 * a1 - t1 * a0),
+                            m0 * a0 + m1_ * a1 + m2 * a2)
+        current = state.q[4 * j + 3]
+        state.q[4 * j + 3] = current + (target - current + np.pi) % (2 * np.pi) - np.pi
+
+
+def start_moving_supports(system, state):
+    """Lay the end supports' links out for ``move_supports`` at the prepared ``state`` (once, at the start of a
+    simulation whose supports move): every admissible coupling gets a slot, so that later steps recompute the
+    links' numbers in place."""
+    patterns = []
+    fixed, links = build_links(system.rod, system.scene.constraints, state, pattern=patterns)
+    system.fixed, system.free, system.links, system.link_patterns = fixed, ~fixed, links, patterns
+    system.mass = condensed_mass(system)
+    system.link_builds += 1
+
+
+def move_supports(system, base, q, out, constraints):
+    """Moving supports (dynamics): put the positions ``q`` into ``out`` with the targets of the support records
+    ``constraints`` applied, the end supports' links recomputed there in place (``constraints.refresh_links``;
+    built afresh only if their layout no longer fits, counted in ``system.link_builds``), the dependents set
+    from them, the frames transported from ``base`` and the clamped end angles set. No scene or system is
+    rebuilt: ``constraints`` has the kinds, ends and free directions of the system's own records, only their
+    rotations and positions move. False if the frame transport failed (an edge reversed)."""
+    rod = system.rod
+    out.q[:] = q
+    if out.q_lo is not None:
+        out.q_lo[:] = 0.0
+    directors = apply_targets(rod, out, constraints)
+    patterns = getattr(system, "link_patterns", None)
+    if patterns is None or not refresh_links(rod, system.links, patterns, constraints, out.q):
+        patterns = []
+        fixed, links = build_links(rod, constraints, out, pattern=patterns)
+        system.fixed, system.free, system.links, system.link_patterns = fixed, ~fixed, links, patterns
+        system.link_builds += 1
+    system.mass = condensed_mass(system)
+    enforce_links(out.q, system.links)
+    if not transport(system, base, out.q, out):
+        return False
+    set_clamp_angles(out, directors)
+    return True
 
 
 def energy_terms(system, state):

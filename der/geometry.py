@@ -127,6 +127,19 @@ def add_compensated(q, q_lo, a, delta, out, out_lo):
 
 
 @njit(cache=True)
+def add_compensated_one(q, q_lo, i, s):
+    """``(q[i], q_lo[i]) += s`` as a compensated pair (one coordinate of ``add_compensated``): the step kept to
+    the rounding of the low part, for kernels that move coordinates one at a time (the explicit solver)."""
+    hi = q[i] + s
+    bb = hi - q[i]
+    err = (q[i] - (hi - bb)) + (s - bb)
+    lo = q_lo[i] + err
+    h2 = hi + lo
+    q_lo[i] = lo - (h2 - hi)
+    q[i] = h2
+
+
+@njit(cache=True)
 def tangents(q, edge_nodes):
     """Unit tangents of all edges, shape (n_edges, 3)."""
     n = edge_nodes.shape[0]

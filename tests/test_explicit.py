@@ -4,6 +4,7 @@ import json
 import subprocess
 import sys
 import textwrap
+import warnings
 
 import numpy as np
 import pytest
@@ -195,3 +196,69 @@ def test_inextensible_explicit_ring_converges_to_the_implicit_state():
     F_im = der.diagnostics.internal_forces(rod, im.state)
     assert np.abs(F_ex - F_im).max() < 1e-6
     assert np.abs(ex.state.lam - im.state.lam).max() < 1e-6 + 1e-3 * np.abs(im.state.lam).max()
+
+
+def _helix_torque_scene(n, offset=0.0):
+    # scenarios/helix_torque.py's scene (one turn of a helix, clamped; a small axial end force and follower torque)
+    from der import closed_forms as cf
+
+    s = der.shapes.helix(1.0, 0.6, 1.0, n)
+    rod = der.rod_from_shape(der.shapes.Shape(s.positions + offset, s.closed, s.director), 1.0, 1.0 / 0.67)
+    return der.Scene(rod, loads=[der.end_force(cf.helix_end_force(1.0, 0.6, 1e-5)), der.end_torque(2e-5, follower=True)],
+                     constraints=[der.clamp("start")])
+
+
+def _tight_reference(scene):
+    # the implicit solve at its round-off floor (a residual of 1e-8 of these small loads leaves ~1e-5 of the
+    # displacement in the slow modes: the default tol is no reference at the 1e-6 level)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", der.RoundoffFloorWarning)
+        return der.solve(scene, tol=1e-13, stability=False, raise_on_failure=False).state.positions
+
+
+def test_explicit_solve_far_from_the_origin_converges_like_one_at_it():
+    # issue 11: FIRE stepped plain absolute coordinates, whose rounding (eps |x|) moved each node force by
+    # ~eps |x| A1 / h^3: 10^4 away from the origin that is ~1e-3 of these small loads, and the solve stalled far
+    # above tol. With compensated positions (RodState.q_lo) the edges carry eps |e| wherever the rod is.
+    out = []
+    for offset in (0.0, 1e4):
+        res = der.solve(_helix_torque_scene(30, offset), solver="explicit", stability=False, raise_on_failure=False,
+                        max_steps=100_000)
+        assert res.status == "converged" and res.residual <= 1e-8, (offset, res.status, res.message)
+        out.append(res.state.positions - offset)
+    ref = _tight_reference(_helix_torque_scene(30))
+    disp = np.abs(ref - _helix_torque_scene(30).rod.rest_state().positions).max()
+    errors = [np.abs(x - ref).max() / disp for x in out]
+    assert max(errors) <= 1e-5, errors
+
+
+def test_explicit_verdict_at_the_round_off_floor_is_certified_by_a_newton_correction():
+    # tol far below the floor: the explicit solve must end "converged_at_floor" with residual / tol in its message
+    # once a Newton correction (not applied) is within displacement_tol of the displacement, and the state must be
+    # that accurate. Before, the floor verdict demanded the implicit solver's max(tol, 1e-13) and FIRE, whose
+    # slow forces are round-off there, ran to its step limit (helix_torque n = 200: 5 million steps).
+    scene = _helix_torque_scene(30)
+    with pytest.warns(der.RoundoffFloorWarning):
+        res = der.solve(scene, solver="explicit", tol=1e-13, stability=False, raise_on_failure=False,
+                        max_steps=300_000)
+    assert res.status == "converged_at_floor", res.message
+    assert res.converged and res.residual > 1e-13 and "times tol" in res.message
+    ref = _tight_reference(scene)
+    disp = np.abs(ref - scene.rod.rest_state().positions).max()
+    assert np.abs(res.state.positions - ref).max() <= 1e-6 * disp
+
+
+def test_compensated_projection_reaches_the_strain_floor_of_the_edges():
+    # the fast projection of a rod far from the origin: with low parts it ends at strains of round-off of the edge
+    # lengths (~1e-15); on the coordinates alone it could not go below eps |x| / h
+    rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, 1.0, 40), 1.0, 1.5)
+    q = rod.rest_q + 1e5
+    q[3::4] = 0.0
+    rng = np.random.default_rng(4)
+    q += 1e-3 * rng.standard_normal(q.size) * np.tile([1.0, 1.0, 1.0, 0.0], rod.n_nodes)
+    w = np.ones(q.size)
+    w[3::4] = 0.0
+    lo = np.zeros_like(q)
+    strain = project_positions(q, rod.edge_nodes, rod.l_bar, w, rod.closed, 50, 1e-14, lo)
+    assert strain <= 1e-14
+    assert np.abs(lo).max() > 0.0

@@ -36,10 +36,11 @@ def test_explicit_reaches_the_implicit_self_contact_equilibrium_and_conserves_lk
     seen = []
     run = ec.ContactRun.run
 
-    def watching(self, plan, q, d1, *args):
-        out = run(self, plan, q, d1, *args)
-        state = der.RodState(q.copy(), d1.copy(), np.zeros_like(d1), args[1].copy())
-        state.tangents[:] = der.geometry.tangents(q, rod.edge_nodes)
+    def watching(self, plan, q, q_lo, d1, *args):
+        out = run(self, plan, q, q_lo, d1, *args)
+        x = q + q_lo        # the compensated positions, as one array
+        state = der.RodState(x, d1.copy(), np.zeros_like(d1), args[1].copy())
+        state.tangents[:] = der.geometry.tangents(x, rod.edge_nodes)
         seen.append((dg.linking_number(rod, state)[0], self.term.diagnostics(state)["min_distance"]))
         return out
 

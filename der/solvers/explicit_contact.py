@@ -24,10 +24,10 @@ from numba import njit
 
 from ..contact.barrier import GAP, pair_barrier
 from ..contact.ccd import pairs_ccd
-from ..geometry import transport_frames
+from ..geometry import add_compensated_one, edge_array, transport_frames
 from ..linalg import condense_vector
 from ..scene import evaluate
-from .explicit import NOISE_FACTOR, STATUS_CONVERGED, STATUS_NONFINITE, STATUS_RUNNING
+from .explicit import NOISE_FACTOR, STATUS_CONVERGED, STATUS_NONFINITE, STATUS_RUNNING, _follow_links
 from .projection import project_force, project_positions, project_velocity
 
 STATUS_REBUILD = 3
@@ -36,9 +36,10 @@ CCD_TOL, CCD_MAX_ITER = 1e-6, 10000
 
 
 @njit(cache=True)
-def barrier_gradient(q, edges, pairs, edge_radius, dhat, kappa, grad):
+def barrier_gradient(q, edges, pairs, edge_radius, dhat, kappa, grad, q_lo=None):
     """kappa sum b(gap) over the pairs (GAP variable), and its gradient added into ``grad`` (n_dof,) at the node
-    DOFs 4 k (positions are q.reshape(-1, 4)[:, :3]). Returns (energy, min gap); energy +inf on an overlap."""
+    DOFs 4 k (positions are q.reshape(-1, 4)[:, :3], plus the low parts ``q_lo`` of compensated positions if
+    given). Returns (energy, min gap); energy +inf on an overlap."""
     x = np.empty(12)
     g = np.empty(12)
     H = np.empty((12, 12))
@@ -50,6 +51,8 @@ def barrier_gradient(q, edges, pairs, edge_radius, dhat, kappa, grad):
         for k in range(4):
             for i in range(3):
                 x[3 * k + i] = q[4 * nodes[k] + i]
+                if q_lo is not None:
+                    x[3 * k + i] += q_lo[4 * nodes[k] + i]
         e, z = pair_barrier(x, edge_radius[ea] + edge_radius[eb], dhat, kappa, GAP, False, g, H)
         min_gap = min(min_gap, z)
         if e == 0.0:
@@ -83,15 +86,15 @@ def _max_shift(q, x_ref):
 
 
 @njit(cache=True)
-def _forces(plan, q, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius, dhat, kappa):
+def _forces(plan, q, q_lo, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius, dhat, kappa):
     """Elastic + barrier energy; grad <- dE/dq (barrier included), fext <- the loads."""
-    energy = evaluate(plan, q, d1, twist, lam, 1, grad, fext, ab, kl, ku, perm)
-    e_c, _ = barrier_gradient(q, edges, pairs, edge_radius, dhat, kappa, grad)
+    energy = evaluate(plan, q, d1, twist, lam, 1, grad, fext, ab, kl, ku, perm, q_lo)
+    e_c, _ = barrier_gradient(q, edges, pairs, edge_radius, dhat, kappa, grad, q_lo)
     return energy + e_c
 
 
 @njit(cache=True)
-def fire_run_contact(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol, n_steps, dt, dt_max,
+def fire_run_contact(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol, n_steps, dt, dt_max,
                      alpha, n_pos, n_min, f_inc, f_dec, alpha0, f_alpha, kl, ku, perm, e_total, work_done, guard,
                      project, w, closed, target, max_strain, noise, link_dep, link_const, tri_dep, tri_master,
                      tri_coef, edges, pairs, edge_radius, dhat, kappa, x_ref, margin, fresh):
@@ -106,13 +109,15 @@ def fire_run_contact(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scal
     fext = np.zeros(n)
     ab = np.zeros((1, 1))
     q_old = q.copy()
+    lo_old = q_lo.copy()
     d1_old = d1.copy()
     t_old = tangents.copy()
     tw_old = twist.copy()
     f = np.zeros(n)
     pos0 = np.empty((n_nodes, 3))
     dpos = np.empty((n_nodes, 3))
-    energy = _forces(plan, q, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius, dhat, kappa)
+    energy = _forces(plan, q, q_lo, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius, dhat,
+                     kappa)
     residual = np.inf
     rejected = 0
     ccd_rejected = 0
@@ -121,7 +126,7 @@ def fire_run_contact(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scal
         for i in range(n):
             f[i] = fext[i] - grad[i]
         condense_vector(f, tri_dep, tri_master, tri_coef, fixed)
-        if project and not project_force(q, plan.edge_nodes, plan.l_bar, w, closed, f, lam):
+        if project and not project_force(q, plan.edge_nodes, plan.l_bar, w, closed, f, lam, q_lo):
             return (STATUS_NONFINITE, step, residual, dt, alpha, n_pos, e_total, work_done, rejected, dt_max,
                     ccd_rejected)
         for i in range(n):
@@ -159,6 +164,7 @@ def fire_run_contact(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scal
             alpha = alpha0
             n_pos = 0
         q_old[:] = q
+        lo_old[:] = q_lo
         d1_old[:, :] = d1
         t_old[:, :] = tangents
         tw_old[:] = twist
@@ -166,20 +172,18 @@ def fire_run_contact(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scal
         for i in range(n):
             if not fixed[i]:
                 v[i] += dt * f[i] / mass[i]
-                q[i] += dt * v[i]
-        for k in range(link_dep.shape[0]):
-            q[link_dep[k]] = link_const[k]
-        for k in range(tri_dep.shape[0]):
-            q[tri_dep[k]] += tri_coef[k] * q[tri_master[k]]
+                add_compensated_one(q, q_lo, i, dt * v[i])
+        _follow_links(q, q_lo, link_dep, link_const, tri_dep, tri_master, tri_coef)
         ok = True
         if project:
-            ok = project_positions(q, plan.edge_nodes, plan.l_bar, w, closed, 20, target) <= max_strain
+            ok = project_positions(q, plan.edge_nodes, plan.l_bar, w, closed, 20, target, q_lo) <= max_strain
             if ok:
-                ok = project_velocity(q, plan.edge_nodes, plan.l_bar, w, closed, v)
+                ok = project_velocity(q, plan.edge_nodes, plan.l_bar, w, closed, v, q_lo)
         if ok and _max_shift(q, x_ref) > margin:
             if not (fresh and step == 0):
                 # the pair list no longer covers this step: end the call at the last accepted state
                 q[:] = q_old
+                q_lo[:] = lo_old
                 v[:] = v_old
                 return (STATUS_REBUILD, step, residual, dt, alpha, n_pos, e_total, work_done, rejected, dt_max,
                         ccd_rejected)
@@ -197,19 +201,19 @@ def fire_run_contact(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scal
                 ok = False
                 ccd_rejected += 1
         ok = ok and transport_frames(q, plan.edge_nodes, plan.vertex_edges, t_old, d1_old, tw_old, tangents, d1,
-                                     twist)
+                                     twist, edge_array(q, plan.edge_nodes, q_lo))
         fext_old_dot = 0.0
         for i in range(n):
-            fext_old_dot += fext[i] * (q[i] - q_old[i])
+            fext_old_dot += fext[i] * ((q[i] - q_old[i]) + (q_lo[i] - lo_old[i]))
         new_energy = np.inf
         if ok:
-            new_energy = _forces(plan, q, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius,
+            new_energy = _forces(plan, q, q_lo, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius,
                                  dhat, kappa)
         kinetic = 0.0
         fext_new_dot = 0.0
         for i in range(n):
             kinetic += 0.5 * mass[i] * v[i] * v[i]
-            fext_new_dot += fext[i] * (q[i] - q_old[i])
+            fext_new_dot += fext[i] * ((q[i] - q_old[i]) + (q_lo[i] - lo_old[i]))
         new_work = work_done + 0.5 * (fext_old_dot + fext_new_dot)
         new_total = kinetic + new_energy - new_work
         slack = guard * (abs(new_energy) + abs(new_work) + abs(kinetic))
@@ -218,6 +222,7 @@ def fire_run_contact(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scal
             if dt > 0.5 * dt_max:
                 dt_max *= 0.9
             q[:] = q_old
+            q_lo[:] = lo_old
             d1[:, :] = d1_old
             tangents[:, :] = t_old
             twist[:] = tw_old
@@ -226,7 +231,7 @@ def fire_run_contact(plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scal
             dt *= f_dec
             alpha = alpha0
             n_pos = 0
-            energy = _forces(plan, q, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius, dhat,
+            energy = _forces(plan, q, q_lo, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius, dhat,
                              kappa)
             e_total = energy - work_done
             continue
@@ -270,7 +275,7 @@ class ContactRun:
         self.pairs = C.candidate_pairs(self.x_ref, t.topo, t.dhat + 2.0 * self.margin)
         self.rebuilds += 1
 
-    def run(self, plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol, n_steps, *rest):
+    def run(self, plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol, n_steps, *rest):
         """``explicit._fire_run``'s contract, run in calls of the contact kernel between pair-list rebuilds
         (bounded: every call after a rebuild takes or rejects at least one step)."""
         t = self.term
@@ -283,7 +288,7 @@ class ContactRun:
             if fresh:
                 self._rebuild(q)
             out = fire_run_contact(
-                plan, q, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol, n_steps - done_total, dt, dt_max,
+                plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, inv_scale, tol, n_steps - done_total, dt, dt_max,
                 alpha, n_pos, n_min, f_inc, f_dec, alpha0, f_alpha, kl, ku, perm, e_total, work_done, guard, project,
                 w, closed, target, max_strain, noise, link_dep, link_const, tri_dep, tri_master, tri_coef,
                 t.topo.edges, self.pairs, t.topo.edge_radius, t.dhat, t.kappa, self.x_ref, self.margin, fresh)

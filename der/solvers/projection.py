@@ -21,11 +21,15 @@ All kernels work on the flat state vector ``q`` (4 entries per node: x, y, z, th
 import numpy as np
 from numba import njit
 
+from ..geometry import add_compensated_one, edge_array
+
 
 @njit(cache=True)
-def _tangents(q, edge_nodes, l_bar, w, t, g):
+def _tangents(q, edge_nodes, l_bar, w, t, g, q_lo=None):
     """Unit tangents t (ne, 3) and elongations g (ne,) at q; returns max |g_j| / l_j over the edges that can move
-    (some inverse mass w > 0 on their nodes), inf if an edge vanished."""
+    (some inverse mass w > 0 on their nodes), inf if an edge vanished. With ``q_lo`` (the low parts of compensated
+    positions, ``RodState.q_lo``) the edges are formed from both parts, as ``geometry.edge_array`` does: each is
+    then rounded at its own length, not at the size of the coordinates."""
     worst = 0.0
     for j in range(edge_nodes.shape[0]):
         a = 4 * edge_nodes[j, 0]
@@ -33,6 +37,10 @@ def _tangents(q, edge_nodes, l_bar, w, t, g):
         e0 = q[b] - q[a]
         e1 = q[b + 1] - q[a + 1]
         e2 = q[b + 2] - q[a + 2]
+        if q_lo is not None:
+            e0 += q_lo[b] - q_lo[a]
+            e1 += q_lo[b + 1] - q_lo[a + 1]
+            e2 += q_lo[b + 2] - q_lo[a + 2]
         le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
         if not le > 0.0:
             return np.inf
@@ -144,14 +152,15 @@ def _add_ct(edge_nodes, t, mu, scale, w, out):
 
 
 @njit(cache=True)
-def project_force(q, edge_nodes, l_bar, w, closed, f, mu):
+def project_force(q, edge_nodes, l_bar, w, closed, f, mu, q_lo=None):
     """f <- f - C^T mu with mu = A^-1 C W f (mu written to ``mu``): the part of the force f that does work along
     the manifold. At an equilibrium the remainder vanishes and mu is the edge tension. ``w`` is the inverse
-    mass, zero on fixed DOFs (f must be zero there too). Returns False if an edge vanished."""
+    mass, zero on fixed DOFs (f must be zero there too); ``q_lo`` the low parts of compensated positions (or None).
+    Returns False if an edge vanished."""
     ne = edge_nodes.shape[0]
     t = np.empty((ne, 3))
     g = np.empty(ne)
-    if not np.isfinite(_tangents(q, edge_nodes, l_bar, w, t, g)):
+    if not np.isfinite(_tangents(q, edge_nodes, l_bar, w, t, g, q_lo)):
         return False
     diag = np.empty(ne)
     off = np.empty(ne)
@@ -169,10 +178,13 @@ def project_force(q, edge_nodes, l_bar, w, closed, f, mu):
 
 
 @njit(cache=True)
-def project_positions(q, edge_nodes, l_bar, w, closed, max_iter, target):
+def project_positions(q, edge_nodes, l_bar, w, closed, max_iter, target, q_lo=None):
     """Fast projection of q onto |e_j| = l_j (in place; fixed DOFs, w = 0, never move). Iterates while the
     largest strain exceeds ``target``, at most ``max_iter`` times, and stops early where it no longer falls
-    fourfold below 1e-9 (the round-off floor).
+    fourfold below 1e-9 (the round-off floor). With ``q_lo`` the positions are compensated pairs
+    ``q + q_lo`` (``RodState.q_lo``): edges are formed from both parts and each correction is added without
+    rounding it to the coordinate (``geometry.add_compensated``), so that the projection's floor is eps |e|, not
+    eps |x|.
     Returns the largest |strain| left (inf if an edge vanished)."""
     ne = edge_nodes.shape[0]
     t = np.empty((ne, 3))
@@ -182,14 +194,22 @@ def project_positions(q, edge_nodes, l_bar, w, closed, max_iter, target):
     dl = np.empty(ne)
     wc = np.empty(ne)
     wd = np.empty(ne)
-    worst = _tangents(q, edge_nodes, l_bar, w, t, g)
+    dq = np.zeros(q.shape[0]) if q_lo is not None else np.zeros(0)
+    worst = _tangents(q, edge_nodes, l_bar, w, t, g, q_lo)
     for it in range(max_iter):
         if not np.isfinite(worst) or worst <= target:
             break
         _assemble(edge_nodes, t, w, closed, diag, off)
         _solve(diag, off, g, closed, dl, wc, wd)
-        _add_ct(edge_nodes, t, dl, -1.0, w, q)
-        new = _tangents(q, edge_nodes, l_bar, w, t, g)
+        if q_lo is None:
+            _add_ct(edge_nodes, t, dl, -1.0, w, q)
+        else:
+            dq[:] = 0.0
+            _add_ct(edge_nodes, t, dl, -1.0, w, dq)
+            for i in range(q.shape[0]):
+                if dq[i] != 0.0:
+                    add_compensated_one(q, q_lo, i, dq[i])
+        new = _tangents(q, edge_nodes, l_bar, w, t, g, q_lo)
         stuck = not new < 0.25 * worst
         worst = new
         if stuck and worst < 1e-9:    # no longer quadratic at this size: the round-off floor
@@ -198,12 +218,12 @@ def project_positions(q, edge_nodes, l_bar, w, closed, max_iter, target):
 
 
 @njit(cache=True)
-def project_velocity(q, edge_nodes, l_bar, w, closed, v):
-    """v <- v - W C^T A^-1 C v (RATTLE): the velocity made tangent to the manifold at q, in place."""
+def project_velocity(q, edge_nodes, l_bar, w, closed, v, q_lo=None):
+    """v <- v - W C^T A^-1 C v (RATTLE): the velocity made tangent to the manifold at q (+ q_lo), in place."""
     ne = edge_nodes.shape[0]
     t = np.empty((ne, 3))
     g = np.empty(ne)
-    if not np.isfinite(_tangents(q, edge_nodes, l_bar, w, t, g)):
+    if not np.isfinite(_tangents(q, edge_nodes, l_bar, w, t, g, q_lo)):
         return False
     diag = np.empty(ne)
     off = np.empty(ne)
@@ -221,8 +241,7 @@ def held_strain(rod, state, w):
     strain the constraints hold them at."""
     wn = w.reshape(-1, 4)[:, :3]
     held = np.flatnonzero(~(wn[rod.edge_nodes[:, 0]].any(axis=1) | wn[rod.edge_nodes[:, 1]].any(axis=1)))
-    x = state.q.reshape(-1, 4)[:, :3]
-    length = np.linalg.norm(x[rod.edge_nodes[held, 1]] - x[rod.edge_nodes[held, 0]], axis=1)
+    length = np.linalg.norm(edge_array(state.q, rod.edge_nodes, state.q_lo)[held], axis=1)
     return held, np.abs(length - rod.l_bar[held]) / rod.l_bar[held]
 
 

@@ -27,8 +27,8 @@ import numpy as np
 from ..geometry import add_compensated
 from ..linalg import add_diagonal, band_solve, band_to_coo, dot, dot_abs
 from .system import (
-    FLOOR_FACTOR, INTERRUPTS, constrain_system, constraint_residual, energy_terms, evaluate_system, expand,
-    final_result, floor_forces, floor_verdict, is_interrupt, load_scales, max_strain, multiplier_update,
+    FLOOR_FACTOR, INTERRUPTS, constrain_system, constraint_residual, energy_terms, evaluate_forces, evaluate_system,
+    expand, final_result, floor_forces, floor_verdict, is_interrupt, load_scales, max_strain, multiplier_update,
     residual_floor, residual_norm, residual_vector, transport,
 )
 
@@ -131,7 +131,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
             t_phase = time.perf_counter()
             forces = None
             if lazy_band:
-                energy, forces = evaluate_system(system, state, 1, pass_forces)
+                energy, forces = evaluate_forces(system, state, pass_forces)
             else:
                 energy = evaluate_system(system, state, 2)
             band_at_state = not lazy_band

@@ -265,6 +265,12 @@ def evaluate_system(system, state, order, forces=None):
     return energy if forces is None else (energy, None)
 
 
+def evaluate_forces(system, state, forces):
+    """``evaluate_system`` at order 1 with the load scale's edge forces and vertex moments in the same pass where
+    it computes them: ``(energy, forces or None)`` (the implicit solver's residual pass, issue 17)."""
+    return evaluate_system(system, state, 1, forces)
+
+
 def add_terms(system, state, order):
     """The scene's contact terms at ``state``: their energy (returned), gradient into ``system.grad`` and, with
     order 2, band-local Hessian blocks into ``system.ab`` and off-band triplets into a fresh ``system.contact_coo``

@@ -364,16 +364,27 @@ def rounding_scale(system, state):
         w[3::4] = np.maximum(np.abs(state.q[3::4]), 1.0)
         return FLOOR_ROUNDINGS * w
     le = np.sqrt((state_edges(system, state) ** 2).sum(axis=1))
-    node = np.zeros(rod.n_nodes)
-    np.maximum.at(node, rod.edge_nodes[:, 0], le)
-    np.maximum.at(node, rod.edge_nodes[:, 1], le)
-    w = np.repeat(node, 4)
+    w = np.repeat(_node_edge_max(le, rod.edge_nodes, rod.n_nodes), 4)
     theta = np.abs(state.q[3::4])
     w[3::4] = np.maximum(theta, 1.0)
     twist = np.abs(state.reference_twist)
     if twist.size:      # the reference twist is added to the angle differences unwrapped
         w[4 * rod.vertex_edges[:, 1] + 3] = np.maximum(w[4 * rod.vertex_edges[:, 1] + 3], twist)
     return FLOOR_ROUNDINGS * w
+
+
+@njit(cache=True)
+def _node_edge_max(le, edge_nodes, n_nodes):
+    """Per node, the largest of ``le`` over the edges on it (0 on a node without edges; NaN propagates, as
+    with ``np.maximum.at``)."""
+    node = np.zeros(n_nodes)
+    for j in range(edge_nodes.shape[0]):
+        v = le[j]
+        for s in range(2):
+            k = edge_nodes[j, s]
+            if v > node[k] or v != v:
+                node[k] = v
+    return node
 
 
 def floor_forces(system, state):

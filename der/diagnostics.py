@@ -441,8 +441,11 @@ def vertex_frenet(rod, state, min_curvature=1e-8):
 
 @njit(cache=True)
 def _edge_forces(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_stretch,
-                 kappa_bar, twist_bar, weld, voronoi, A1, A2, has_stretch, has_bend, has_twist):
-    """F_j = sum of dE/de_j over the energy terms (n_edges, 3), and the internal moment magnitude per vertex."""
+                 kappa_bar, twist_bar, weld, voronoi, A1, A2, has_stretch, has_bend, has_twist, q_lo=None):
+    """F_j = sum of dE/de_j over the energy terms (n_edges, 3), and the internal moment magnitude per vertex.
+    ``q_lo``: the low parts of compensated positions (``RodState.q_lo``), as in ``scene.evaluate``; the solvers'
+    order-1 evaluation of a rod with all three terms computes the same numbers in its own pass
+    (``energies.vertex.stretch_bend_twist_gradient``)."""
     n = edge_nodes.shape[0]
     F = np.zeros((n, 3))
     M = np.zeros(vertex_nodes.shape[0])
@@ -451,7 +454,7 @@ def _edge_forces(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_e
     g8 = np.empty(8)
     H8 = np.empty((8, 8))
     work = np.empty((5, 8))
-    E = edge_array(q, edge_nodes)
+    E = edge_array(q, edge_nodes, q_lo)
     ed = edge_frames(q, edge_nodes, d1, E)
     if has_stretch:
         for j in range(n):

@@ -15,7 +15,7 @@ from . import validate
 from .energies.bend import bend_energy, bend_gradient, bend_hessian
 from .energies.stretch import stretch_energy, stretch_gradient, stretch_hessian
 from .energies.twist import twist_energy, twist_gradient, twist_hessian
-from .energies.vertex import bend_twist_hessian, stretch_bend_twist_hessian
+from .energies.vertex import bend_twist_hessian, stretch_bend_twist_gradient, stretch_bend_twist_hessian
 from .geometry import add_transport_jacobian, edge_array, edge_frames
 from .linalg import zero_band
 from .loads import (
@@ -268,14 +268,21 @@ def make_plan(scene, k_stretch):
     )
 
 
+def edge_forces_in_pass(plan, order):
+    """True when ``evaluate`` at ``order`` fills its ``F``, ``M`` arguments (order 1, all three terms)."""
+    return order == 1 and plan.has_stretch and plan.has_bend and plan.has_twist
+
+
 @njit(cache=True)
-def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, perm, q_lo=None):
+def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, perm, q_lo=None, F=None, M=None):
     """Energy of the scene at ``q``; ``grad`` <- dE/dq, ``fext`` <- generalized external force.
 
     With ``order >= 2`` also ``ab`` <- the force Jacobian ``K = d(grad - fext)/dq`` in band storage: the energy
     Hessian, the frame-transport term and the load stiffness. ``grad``, ``fext`` and ``ab`` are overwritten.
     ``q_lo``: the low parts of compensated positions (``RodState.q_lo``) or None; the edges every term uses are
     formed once, here (``geometry.edge_array``), with the relative accuracy of the edges themselves.
+    ``F``, ``M``: with order 1 and all three terms, filled with ``diagnostics._edge_forces`` of the state (the
+    solver's load scale) in the same pass; untouched otherwise (check ``edge_forces_in_pass``).
     """
     E = edge_array(q, plan.edge_nodes, q_lo)
     grad[:] = 0.0
@@ -283,8 +290,10 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
     if order >= 2:
         zero_band(ab)
     energy = 0.0
-    # all three terms at order 2: one pass over the vertex stencils, each edge's stretching inside one of them
-    full = order >= 2 and plan.has_stretch and plan.has_bend and plan.has_twist
+    # all three terms: one pass over the vertex stencils, each edge's stretching inside one of them; at order 1 the
+    # same pass without the band, so that the forces are bitwise the same with and without the Jacobian (a solver
+    # evaluates its residual first and assembles the band only for a step, issue 17)
+    full = order >= 1 and plan.has_stretch and plan.has_bend and plan.has_twist
     if plan.has_stretch and not full:
         plan.counters[0] += 1
         if order >= 2:
@@ -302,10 +311,16 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
         plan.counters[0] += 1
         plan.counters[1] += 1
         plan.counters[2] += 1
-        e_stretch, e_bend, e_twist = stretch_bend_twist_hessian(
-            q, ed, plan.edge_nodes, plan.vertex_nodes, plan.vertex_edges, plan.l_bar, plan.k_stretch, lam,
-            reference_twist, plan.weld, plan.kappa_bar, plan.twist_bar, plan.voronoi, plan.A1, plan.A2, grad, ab, kl,
-            ku, perm, E)
+        if order >= 2:
+            e_stretch, e_bend, e_twist = stretch_bend_twist_hessian(
+                q, ed, plan.edge_nodes, plan.vertex_nodes, plan.vertex_edges, plan.l_bar, plan.k_stretch, lam,
+                reference_twist, plan.weld, plan.kappa_bar, plan.twist_bar, plan.voronoi, plan.A1, plan.A2, grad, ab,
+                kl, ku, perm, E)
+        else:
+            e_stretch, e_bend, e_twist = stretch_bend_twist_gradient(
+                q, ed, plan.edge_nodes, plan.vertex_nodes, plan.vertex_edges, plan.l_bar, plan.k_stretch, lam,
+                reference_twist, plan.weld, plan.kappa_bar, plan.twist_bar, plan.voronoi, plan.A1, plan.A2, grad, E,
+                F, M)
         energy += e_stretch
         energy += e_bend
         energy += e_twist

@@ -227,3 +227,76 @@ def test_implicit_retried_steps_reassemble_the_factorised_band():
     assert a.converged and a.iterations == b.iterations
     assert a.residual == b.residual
     assert np.array_equal(a.state.q, b.state.q)
+
+
+@pytest.mark.parametrize("closed", [False, True])
+def test_order_one_pass_sums_as_the_assembly(closed):
+    """scene.evaluate at order 1 (the solver's residual pass) gives bitwise the energy, gradient and loads of the
+    order-2 assembly (the same fused pass without the band), and in the same pass the edge forces and vertex
+    moments of the load scale bitwise as diagnostics._edge_forces on the same compensated edges; on an open
+    helix under dead and follower loads and a welded ring."""
+    from der.diagnostics import _edge_forces
+    from der.linalg import band_layout, new_band
+    from der.scene import evaluate, make_plan
+
+    rng = np.random.default_rng(7)
+    if closed:
+        rod = der.rod_from_shape(der.shapes.ring(1.0, 31), 1.0, 1.5).with_imposed_twist(0.4)
+        loads = []
+    else:
+        rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, 2, 45), 1.0, 1.5)
+        loads = [der.end_force([0.1, 0.0, 0.2]), der.end_torque([0.0, 0.3, 0.1])]
+    state = rod.rest_state()
+    q = state.q + 1e-2 * rng.standard_normal(rod.n_dof)
+    q_lo = 1e-19 * rng.standard_normal(rod.n_dof)
+    lam = 0.1 * rng.standard_normal(rod.n_edges)
+    plan = make_plan(der.Scene(rod, loads=loads), 10.0 + rng.random(rod.n_edges))
+    kl, ku, perm = band_layout(rod.n_nodes, rod.closed)
+    g1, f1, g2, f2 = (np.zeros(rod.n_dof) for _ in range(4))
+    ab = new_band(rod.n_dof, kl, ku)
+    F, M = np.full((rod.n_edges, 3), np.nan), np.full(rod.n_vertices, np.nan)
+    e1 = evaluate(plan, q, state.d1, state.reference_twist, lam, 1, g1, f1, ab, kl, ku, perm, q_lo, F, M)
+    e2 = evaluate(plan, q, state.d1, state.reference_twist, lam, 2, g2, f2, ab, kl, ku, perm, q_lo)
+    assert e1 == e2
+    assert np.array_equal(g1, g2) and np.array_equal(f1, f2)
+    F0, M0 = _edge_forces(q, state.d1, state.reference_twist, lam, rod.edge_nodes, rod.vertex_nodes,
+                          rod.vertex_edges, rod.l_bar, plan.k_stretch, plan.kappa_bar, rod.twist_bar, plan.weld,
+                          rod.voronoi, plan.A1, plan.A2, True, True, True, q_lo)
+    assert np.array_equal(F, F0) and np.array_equal(M, M0)
+
+
+def test_implicit_assembles_the_band_only_for_steps():
+    """The band path evaluates the residual without the band and assembles it only for a step it factorises:
+    an inextensible ring twisted by an end torque (multiplier updates, no step) converges with exactly one
+    assembly per band factorisation, bitwise where the path that assembles at every iteration ends (IN_PLACE
+    False, the contact scenes' path). Before: one assembly more per multiplier update and at the converged check."""
+    from der import closed_forms as cf
+    from der.solvers import implicit
+
+    rod = der.rod_from_shape(der.shapes.arc(1.0, 3.0, 60), 1.0, 1.0 / 0.67)
+    scene = der.Scene(rod, loads=[der.end_torque(1e-3 * cf.ring_end_basis(1.0, 3.0)[0])],
+                      constraints=[der.clamp("start")])
+    orig = implicit.evaluate_system
+    orders = []
+
+    def counting(system, state, order, *args):
+        orders.append(order)
+        return orig(system, state, order, *args)
+
+    results, assemblies = {}, {}
+    implicit.evaluate_system = counting
+    try:
+        for in_place in (True, False):
+            implicit.IN_PLACE = in_place
+            orders.clear()
+            results[in_place] = der.solve(scene, stability=False, raise_on_failure=False)
+            assemblies[in_place] = orders.count(2)
+    finally:
+        implicit.evaluate_system = orig
+        implicit.IN_PLACE = True
+    a, b = results[True], results[False]
+    assert a.status == "converged" and b.status == "converged"
+    assert a.iterations == b.iterations and a.residual == b.residual
+    assert np.array_equal(a.state.q, b.state.q)
+    assert assemblies[True] == a.linear_solves["band"]
+    assert assemblies[False] > assemblies[True]

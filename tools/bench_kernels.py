@@ -10,9 +10,10 @@ checks that both give the same numbers. Reported: median seconds over ``--repeat
 second and the NumPy/numba ratio. Compilation is excluded (warm-up call first) and reported apart.
 
 Side by side in the same run (issue 17): the gradient + band Hessian assembly against the gradient alone
-(``hess_over_grad``), the assembly as it was before issue 17 (``hess_legacy_s``, kept below as the baseline:
-row-by-row scattering, bending and twisting scattered in two passes) and one LAPACK ``dgbsv`` on the same band
-(``dgbsv_s``), the floor of a Newton iteration.
+(``hess_over_grad``; the gradient is der's order-1 pass, which sums exactly as the assembly, and
+``grad_separate_s`` the three separate passes it replaced), the assembly as it was before issue 17
+(``hess_legacy_s``, kept below as the baseline: row-by-row scattering, bending and twisting scattered in two
+passes) and one LAPACK ``dgbsv`` on the same band (``dgbsv_s``), the floor of a Newton iteration.
 """
 import argparse
 import json
@@ -30,7 +31,9 @@ from der.geometry import transport_frames  # noqa: E402
 from der.linalg import band_layout, band_solve, new_band  # noqa: E402
 from der.scene import evaluate, make_plan  # noqa: E402
 from numba import njit  # noqa: E402
-from der.energies.bend import _bend_local  # noqa: E402
+from der.energies.bend import _bend_local, bend_gradient  # noqa: E402
+from der.energies.stretch import stretch_gradient  # noqa: E402
+from der.energies.twist import twist_gradient  # noqa: E402
 from der.energies.stretch import _stretch_local  # noqa: E402
 from der.energies.twist import _twist_local  # noqa: E402
 from der.geometry import add_transport_jacobian, edge_array, edge_frames  # noqa: E402
@@ -93,6 +96,21 @@ def legacy_hessian(plan, q, d1, reference_twist, lam, grad, ab, kl, ku, perm):
     for j in range(n_edges):
         dE_dtheta[j] = grad[4 * j + 3]
     add_transport_jacobian(q, plan.edge_nodes, dE_dtheta, ab, kl, ku, perm)
+    return energy
+
+
+@njit(cache=True)
+def separate_gradient(plan, q, d1, reference_twist, lam, grad):
+    """The gradient as der's order-1 evaluation computed it before the fused gradient pass (issue 17): stretching,
+    bending and twisting in three passes (the baseline of the "grad_separate" column)."""
+    grad[:] = 0.0
+    E = edge_array(q, plan.edge_nodes)
+    energy = stretch_gradient(q, plan.edge_nodes, plan.l_bar, plan.k_stretch, lam, grad, E)
+    ed = edge_frames(q, plan.edge_nodes, d1, E)
+    energy += bend_gradient(ed, plan.vertex_nodes, plan.vertex_edges, plan.weld, plan.kappa_bar, plan.voronoi,
+                            plan.A1, grad)
+    energy += twist_gradient(q, ed, plan.vertex_nodes, plan.vertex_edges, reference_twist, plan.weld,
+                             plan.twist_bar, plan.voronoi, plan.A2, grad)
     return energy
 
 
@@ -265,6 +283,7 @@ def main(argv=None):
     g, f, ab = np.zeros(rod.n_dof), np.zeros(rod.n_dof), new_band(rod.n_dof, kl, ku)
     evaluate(plan, st.q, st.d1, st.reference_twist, lam, 2, g, f, ab, kl, ku, perm)
     legacy_hessian(plan, st.q, st.d1, st.reference_twist, lam, g, ab, kl, ku, perm)
+    separate_gradient(plan, st.q, st.d1, st.reference_twist, lam, g)
     compile_s = time.perf_counter() - t0
     rows = []
     for n in args.n:
@@ -283,6 +302,11 @@ def main(argv=None):
 
         def legacy_hess():
             legacy_hessian(plan, st.q, st.d1, st.reference_twist, lam, g_old, ab_old, kl, ku, perm)
+
+        g_sep = np.zeros(rod.n_dof)
+
+        def separate_grad():
+            separate_gradient(plan, st.q, st.d1, st.reference_twist, lam, g_sep)
 
         work = new_band(rod.n_dof, kl, ku)
 
@@ -307,6 +331,14 @@ def main(argv=None):
         legacy_hess()
         legacy_diff = max(np.abs(g_old - g).max() / np.abs(g).max(), np.abs(ab_old - ab).max() / np.abs(ab).max())
         assert legacy_diff < 1e-12, legacy_diff
+        # the order-1 pass sums exactly as the assembly (bitwise); the old separate passes to round-off
+        g_hess = g.copy()
+        numba_grad()
+        grad_bitwise = bool(np.array_equal(g, g_hess))
+        assert grad_bitwise
+        separate_grad()
+        separate_diff = np.abs(g_sep - g).max() / np.abs(g).max()
+        assert separate_diff < 1e-12, separate_diff
         # a solvable band for the dgbsv timing: a dominant diagonal
         ab[:, :] += 1e3 * np.abs(ab).max() * (np.arange(ab.shape[0]) == kl + ku)[:, None]
         t_solve = max(timed(dgbsv, args.repeat) - timed(copy, args.repeat), 1e-9)
@@ -314,6 +346,8 @@ def main(argv=None):
         r = {"n": n, "grad_numba_s": timed(numba_grad, args.repeat),
              "grad_numpy_s": timed(lambda: numpy_evaluate(rod, st.q, st.d1, st.reference_twist, k, lam, False,
                                                           kl, ku, perm), args.repeat),
+             "grad_separate_s": timed(separate_grad, args.repeat),
+             "grad_same_as_assembly_bitwise": grad_bitwise, "max_rel_diff_grad_separate": separate_diff,
              "hess_numba_s": timed(numba_hess, args.repeat),
              "hess_legacy_s": timed(legacy_hess, args.repeat),
              "dgbsv_s": t_solve, "max_rel_diff_legacy": legacy_diff,
@@ -323,6 +357,7 @@ def main(argv=None):
         r["grad_ratio"] = r["grad_numpy_s"] / r["grad_numba_s"]
         r["hess_ratio"] = r["hess_numpy_s"] / r["hess_numba_s"]
         r["hess_over_grad"] = r["hess_numba_s"] / r["grad_numba_s"]
+        r["hess_over_grad_separate"] = r["hess_numba_s"] / r["grad_separate_s"]
         r["hess_legacy_over_grad"] = r["hess_legacy_s"] / r["grad_numba_s"]
         r["legacy_over_new"] = r["hess_legacy_s"] / r["hess_numba_s"]
         r["grad_node_evals_per_s"] = rod.n_nodes / r["grad_numba_s"]
@@ -343,10 +378,14 @@ def main(argv=None):
               f"{r['grad_node_evals_per_s']:>20.3e}")
     print("assembly of gradient + band Hessian against the gradient alone, der's against the pre-issue-17 kernel "
           "(same run), and one dgbsv of the same band:")
-    print(f"{'n':>7} {'hess/grad':>10} {'legacy/grad':>12} {'legacy/new':>11} {'dgbsv s':>10} {'hess/dgbsv':>11}")
+    print(f"{'n':>7} {'hess/grad':>10} {'hess/grad_sep':>14} {'legacy/grad':>12} {'legacy/new':>11} {'dgbsv s':>10} "
+          f"{'hess/dgbsv':>11} {'grad/dgbsv':>11}")
     for r in rows:
-        print(f"{r['n']:>7} {r['hess_over_grad']:>10.1f} {r['hess_legacy_over_grad']:>12.1f} "
-              f"{r['legacy_over_new']:>11.2f} {r['dgbsv_s']:>10.2e} {r['hess_numba_s'] / r['dgbsv_s']:>11.2f}")
+        print(f"{r['n']:>7} {r['hess_over_grad']:>10.1f} {r['hess_over_grad_separate']:>14.1f} "
+              f"{r['hess_legacy_over_grad']:>12.1f} {r['legacy_over_new']:>11.2f} {r['dgbsv_s']:>10.2e} "
+              f"{r['hess_numba_s'] / r['dgbsv_s']:>11.2f} {r['grad_numba_s'] / r['dgbsv_s']:>11.2f}")
+    print("(grad: der's order-1 pass, the assembly's sums without the band; grad_sep: the separate stretching, "
+          "bending and twisting passes it replaced)")
     if exps:
         print("time ~ n^p: " + ", ".join(f"{k} = {v:.2f}" for k, v in exps.items()))
     if args.json:

@@ -19,7 +19,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
 sys.path.insert(0, HERE)
 
-CALLS = ("load_scales", "floor_forces", "residual_floor", "band_solve", "transport", "residual_vector", "residual_norm",
+CALLS = ("evaluate_forces", "load_scales", "floor_forces", "residual_floor", "band_solve", "transport", "residual_vector", "residual_norm",
          "max_strain", "add_diagonal", "constrain_system", "floor_verdict", "expand", "dot", "dot_abs",
          "multiplier_update")
 

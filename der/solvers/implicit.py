@@ -27,8 +27,8 @@ import numpy as np
 from ..geometry import add_compensated
 from ..linalg import add_diagonal, band_solve, band_to_coo, dot, dot_abs
 from .system import (
-    FLOOR_FACTOR, INTERRUPTS, constrain_system, constraint_residual, energy_terms, evaluate_system, expand,
-    final_result, floor_forces, floor_verdict, is_interrupt, load_scales, max_strain, multiplier_update,
+    FLOOR_FACTOR, INTERRUPTS, constrain_system, constraint_residual, energy_terms, evaluate_forces, evaluate_system,
+    expand, final_result, floor_forces, floor_verdict, is_interrupt, load_scales, max_strain, multiplier_update,
     residual_floor, residual_norm, residual_vector, transport,
 )
 
@@ -109,19 +109,43 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     exact_below = max([getattr(t, "exact_hessian_below", EXACT_CONTACT_BELOW) for t in system.terms],
                       default=EXACT_CONTACT_BELOW)
     exact_contact = exact_below == np.inf
+    # band path: the forces first (order 1: the same pass and sums as the assembly, bitwise the same residual and
+    # energy), the band only when it is used -- a step, the floor's bound or verdict. A converged check and an
+    # inextensible rod's multiplier update then assemble nothing (issue 17). With contact terms as before.
+    lazy_band = IN_PLACE and not system.terms
+    band_at_state = False
+    # the load scale's edge forces and vertex moments, computed by that same order-1 pass (one rod, all terms)
+    pass_forces = None
+    if lazy_band and system.parts is None:
+        pass_forces = (np.empty((rod.n_edges, 3)), np.empty(rod.n_vertices))
+
+    def assemble():
+        """The band at ``state`` (``system.ab``), unless it is already there and unfactorised."""
+        nonlocal band_at_state
+        if not band_at_state:
+            t0 = time.perf_counter()
+            evaluate_system(system, state, 2)
+            timings["assembly"] += time.perf_counter() - t0
+            band_at_state = True
+
     try:
         while True:
             for t in system.terms:
                 t.project = not exact_contact
             t_phase = time.perf_counter()
-            energy = evaluate_system(system, state, 2)
+            forces = None
+            if lazy_band:
+                energy, forces = evaluate_forces(system, state, pass_forces)
+            else:
+                energy = evaluate_system(system, state, 2)
+            band_at_state = not lazy_band
             timings["assembly"] += time.perf_counter() - t_phase
             if system.terms and any([t.after_step(state) for t in system.terms]):
                 # contact: the adaptive barrier stiffness changed (docs/contact.md section 6); a new landscape
                 energy = evaluate_system(system, state, 2)
                 best, since_best, potential_best = np.inf, 0, potential
             R = residual_vector(system)
-            scales = load_scales(system, state)
+            scales = load_scales(system, state, forces)
             residual = residual_norm(system, R, scales)
             strain = max_strain(system, state) if rod.inextensible else 0.0
             if not (np.isfinite(energy) and np.isfinite(residual) and np.isfinite(scales).all()):
@@ -150,6 +174,8 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 potential_best = min(potential_best, potential)
             else:
                 since_best += 1
+            if strain_ok and since_best >= FLOOR_STALL_ITERATIONS:
+                assemble()      # the floor bound reads the band
             if strain_ok and (since_best >= STALL_ITERATIONS or (
                     since_best >= FLOOR_STALL_ITERATIONS
                     and residual <= FLOOR_FACTOR * residual_floor(system, state, scales))):
@@ -172,6 +198,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 status, message = "time_budget", f"time budget of {options.time_budget:g} s used up"
                 break
             it += 1
+            assemble()
             in_place = IN_PLACE and not system.terms
             if not in_place:
                 if ab_K is None:
@@ -190,14 +217,13 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
             for _attempt in range(MAX_SHRINKS):
                 if in_place and _attempt > 0:
                     # the LU factors of the last attempt overwrote the Jacobian: assemble it again
-                    t_phase = time.perf_counter()
-                    evaluate_system(system, state, 2)
-                    timings["assembly"] += time.perf_counter() - t_phase
+                    assemble()
                 if _attempt == 12 and residual < 100.0 * residual_floor(system, state, scales):
                     break   # near the round-off floor a step that lowers the energy may not exist
                 t_phase = time.perf_counter()
                 if in_place:
                     work = system.ab
+                    band_at_state = False       # factorised in place just below
                 else:
                     work[:] = ab_K
                 add_diagonal(work, kl, ku, perm, diag, 1.0 / dt)

@@ -27,7 +27,7 @@ from ..energies.stretch import elongations
 from ..geometry import edge_array, edge_frames, transport_frames
 from ..linalg import band_layout, band_matvec, condense_band, condense_vector, constrain_band, dot, expand_step, new_band
 from ..loads import DistributedForce, EndForce, EndTorque, FollowerForce, PointForce, PointTorque, TwistingMoment
-from ..scene import COUNTER_NAMES, evaluate, make_plan
+from ..scene import COUNTER_NAMES, edge_forces_in_pass, evaluate, make_plan
 
 
 @dataclass(eq=False)
@@ -245,17 +245,34 @@ def expand(system, delta):
     return delta
 
 
-def evaluate_system(system, state, order):
+def evaluate_system(system, state, order, forces=None):
     """Energy; fills system.grad, system.fext (and system.ab with order 2). With contact terms their energy,
     gradient and band-local Hessian blocks are added, and their off-band Hessian triplets are left in
-    ``system.contact_coo`` (a list of (rows, cols, vals); empty while no pair is active)."""
+    ``system.contact_coo`` (a list of (rows, cols, vals); empty while no pair is active).
+
+    ``forces``: a pair of arrays (n_edges, 3), (n_vertices,) for one rod; where the same pass computes them
+    (``scene.edge_forces_in_pass``) they are filled with the edge forces and vertex moments of the load scale and
+    returned as the second value, ``(energy, forces)``, else ``(energy, None)`` (``load_scales(..., forces)``)."""
     if system.parts is not None:          # several rods (multi.py)
         from . import multi
 
-        return multi.evaluate_system(system, state, order)
+        energy = multi.evaluate_system(system, state, order)
+        return energy if forces is None else (energy, None)
+    if forces is not None and edge_forces_in_pass(system.plan, order):
+        energy = evaluate(system.plan, state.q, state.d1, state.reference_twist, state.lam, order, system.grad,
+                          system.fext, system.ab, system.kl, system.ku, system.perm, state.q_lo, forces[0],
+                          forces[1])
+        return energy + add_terms(system, state, order), forces
     energy = evaluate(system.plan, state.q, state.d1, state.reference_twist, state.lam, order, system.grad,
                       system.fext, system.ab, system.kl, system.ku, system.perm, state.q_lo)
-    return energy + add_terms(system, state, order)
+    energy += add_terms(system, state, order)
+    return energy if forces is None else (energy, None)
+
+
+def evaluate_forces(system, state, forces):
+    """``evaluate_system`` at order 1 with the load scale's edge forces and vertex moments in the same pass where
+    it computes them: ``(energy, forces or None)`` (the implicit solver's residual pass, issue 17)."""
+    return evaluate_system(system, state, 1, forces)
 
 
 def add_terms(system, state, order):
@@ -276,16 +293,21 @@ def contact_force_scale(system):
     return max((t.force_scale for t in system.terms), default=0.0)
 
 
-def load_scales(system, state):
-    """(F_s, M_s): force and moment scales of the residual (see module docstring)."""
+def load_scales(system, state, forces=None):
+    """(F_s, M_s): force and moment scales of the residual (see module docstring). ``forces``: the edge forces
+    and vertex moments at ``state`` when an evaluation already computed them (``evaluate_system``), else None."""
     if system.parts is not None:          # several rods (multi.py)
         from . import multi
 
         return multi.load_scales(system, state)
     rod, plan = system.rod, system.plan
-    F, M = _edge_forces(state.q, state.d1, state.reference_twist, state.lam, rod.edge_nodes, rod.vertex_nodes,
-                        rod.vertex_edges, rod.l_bar, plan.k_stretch, plan.kappa_bar, rod.twist_bar, plan.weld,
-                        rod.voronoi, plan.A1, plan.A2, plan.has_stretch, plan.has_bend, plan.has_twist)
+    if forces is not None:
+        F, M = forces
+    else:
+        F, M = _edge_forces(state.q, state.d1, state.reference_twist, state.lam, rod.edge_nodes, rod.vertex_nodes,
+                            rod.vertex_edges, rod.l_bar, plan.k_stretch, plan.kappa_bar, rod.twist_bar, plan.weld,
+                            rod.voronoi, plan.A1, plan.A2, plan.has_stretch, plan.has_bend, plan.has_twist,
+                            state.q_lo)
     f_int = float(max_row_norm(F)) if F.size else 0.0
     m_int = float(M.max()) if M.size else 0.0
     L = rod.length
@@ -346,16 +368,27 @@ def rounding_scale(system, state):
         w[3::4] = np.maximum(np.abs(state.q[3::4]), 1.0)
         return FLOOR_ROUNDINGS * w
     le = np.sqrt((state_edges(system, state) ** 2).sum(axis=1))
-    node = np.zeros(rod.n_nodes)
-    np.maximum.at(node, rod.edge_nodes[:, 0], le)
-    np.maximum.at(node, rod.edge_nodes[:, 1], le)
-    w = np.repeat(node, 4)
+    w = np.repeat(_node_edge_max(le, rod.edge_nodes, rod.n_nodes), 4)
     theta = np.abs(state.q[3::4])
     w[3::4] = np.maximum(theta, 1.0)
     twist = np.abs(state.reference_twist)
     if twist.size:      # the reference twist is added to the angle differences unwrapped
         w[4 * rod.vertex_edges[:, 1] + 3] = np.maximum(w[4 * rod.vertex_edges[:, 1] + 3], twist)
     return FLOOR_ROUNDINGS * w
+
+
+@njit(cache=True)
+def _node_edge_max(le, edge_nodes, n_nodes):
+    """Per node, the largest of ``le`` over the edges on it (0 on a node without edges; NaN propagates, as
+    with ``np.maximum.at``)."""
+    node = np.zeros(n_nodes)
+    for j in range(edge_nodes.shape[0]):
+        v = le[j]
+        for s in range(2):
+            k = edge_nodes[j, s]
+            if v > node[k] or v != v:
+                node[k] = v
+    return node
 
 
 def floor_forces(system, state):

@@ -136,20 +136,24 @@ def test_explicit_step_above_the_stable_limit_is_refused():
 
 def test_nonfinite_force_is_caught_and_last_finite_state_kept(monkeypatch):
     scene = helix_scene()
-    original = implicit_module.evaluate_system
+    # the residual pass of the banded path (issue 17: the forces alone, the band only for a step)
+    original = implicit_module.evaluate_forces
     calls = {"n": 0}
 
-    def poisoned(system, state, order):
-        if order == 2:
-            calls["n"] += 1
-            if calls["n"] == 4:
-                e = original(system, state, order)
-                system.grad[4 * 10 + 1] = np.nan   # a free DOF (node 10, y)
-                return e
-        return original(system, state, order)
+    n_dof = scene.rod.rest_q.size
 
-    monkeypatch.setattr(implicit_module, "evaluate_system", poisoned)
+    def poisoned(system, state, forces):
+        out = original(system, state, forces)
+        if system.grad.size != n_dof:      # another system (a warm-up's small rod)
+            return out
+        calls["n"] += 1
+        if calls["n"] == 4:
+            system.grad[4 * (system.grad.size // 8) + 1] = np.nan   # a free DOF (the middle node, y)
+        return out
+
+    monkeypatch.setattr(implicit_module, "evaluate_forces", poisoned)
     res = der.solve(scene, raise_on_failure=False)
+    assert calls["n"] >= 4                     # the poisoned pass was reached
     assert res.status == "nonfinite" and not res.converged
     assert np.isfinite(res.state.q).all()
     assert "last finite state kept" in res.message

@@ -271,8 +271,10 @@ def evaluate_system(system, state, order, forces=None):
 
 def evaluate_forces(system, state, forces):
     """``evaluate_system`` at order 1 with the load scale's edge forces and vertex moments in the same pass where
-    it computes them: ``(energy, forces or None)`` (the implicit solver's residual pass, issue 17)."""
-    return evaluate_system(system, state, 1, forces)
+    it computes them: ``(energy, forces or None)`` (the implicit solver's residual pass, issue 17; ``forces`` is
+    None for several rods, whose load scales come from multi.py)."""
+    out = evaluate_system(system, state, 1, forces)
+    return out if forces is not None else (out, None)
 
 
 def add_terms(system, state, order):

@@ -302,3 +302,21 @@ def test_stability_of_a_scene_with_a_huge_dead_force_does_not_fail_in_svd():
     scene = der.Scene(rod, loads=[der.end_force([1e300, 1e300, 0.0])], constraints=[der.clamp("start")])
     (d,) = _dead_directions(scene)
     assert np.allclose(d, [2 ** -0.5, 2 ** -0.5, 0.0], rtol=1e-15)
+
+
+def test_a_helix_stretched_between_clamps_is_not_reported_locked():
+    # a naturally curved rod held at both ends carries a tension of order A1 kappa0^2 by its imposed end-to-end
+    # distance: the 10^6-edge helix of tools/scaling.py was reported "locked" against A1/L^2 alone
+    rod = der.rod_from_shape(der.shapes.helix(2.0, 1.0, 20, 400), A1=1.0, A2=1.5)
+    x = rod.rest_state().positions
+    chord = x[-1] - x[0]
+    move = np.zeros_like(x)
+    move[-2:] = 0.05 * chord                      # the far end pulled 5 % further along the chord
+    start = rod.displaced(rod.rest_state(), move, np.zeros(rod.n_edges))
+    scene = der.Scene(rod, constraints=[der.clamp("start"), der.clamp("end", position=start.positions[-2:].mean(0))])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", der.LockedRodWarning)
+        warnings.simplefilter("ignore", der.RoundoffFloorWarning)
+        res = der.solve(scene, state=start, stability=False, raise_on_failure=False)
+    assert res.status in ("converged", "converged_at_floor") and "locked" not in res.message
+    assert res.load_scale > 100.0 * np.max(rod.A1) / rod.length ** 2     # far above A1/L^2: the old rule fired

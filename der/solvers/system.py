@@ -942,7 +942,7 @@ LOCK_RATIO = 100.0
 
 def locked_rod_note(system, state):
     """A note (or "") for an inextensible open rod whose two end nodes are held in place and whose constraint
-    tension is more than LOCK_RATIO times both its bending scale A1/L^2 and its applied loads: the rod cannot
+    tension is more than LOCK_RATIO times both its bending scale A1 max(1/L^2, kappa0^2) and its applied loads: the rod cannot
     bend without changing its chord, so its multipliers grow until they pull it straight with boundary layers at
     the ends -- the true inextensible limit, but not the beam theory a user may expect."""
     rod = system.rod
@@ -954,12 +954,15 @@ def locked_rod_note(system, state):
     g = state_elongations(system, state)
     tension = float(np.abs(state.lam + system.k_stretch * g).max())
     L = rod.length
-    bending = float(np.max(rod.A1)) / L ** 2
+    # the bending scale: A1 times the larger of 1/L^2 and the natural curvature squared (a naturally curved rod,
+    # a helix stretched between clamps, carries a tension of order A1 kappa0^2 without being locked)
+    kappa0 = float(np.abs(rod.kappa_bar).max(initial=0.0)) * rod.n_edges / L   # kappa_bar is integrated
+    bending = float(np.max(rod.A1)) * max(1.0 / L ** 2, kappa0 ** 2)
     loads = system.applied_force + system.applied_moment / L
     if not tension > LOCK_RATIO * max(bending, loads):
         return ""
     return (f"the inextensible rod is locked between fixed ends; give it EA or a sliding clamp (its constraint "
-            f"tension {tension:.3g} is {tension / bending:.3g} times the bending scale A1/L^2 = {bending:.3g}, "
+            f"tension {tension:.3g} is {tension / bending:.3g} times the bending scale A1 max(1/L^2, kappa0^2) = {bending:.3g}, "
             f"and its loads apply at most {loads:.3g})")
 
 

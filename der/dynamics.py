@@ -61,6 +61,8 @@ INTEGRATORS = ("newmark", "verlet")
 MAX_NEWTON = 30
 MAX_MULTIPLIER_UPDATES = 40
 MAX_HALVINGS = 5           # a Newmark step whose Newton fails is retried as halves, down to dt / 32
+CONTACT_STEP_FRACTION = 0.25  # with self-contact active, each Verlet piece is below 0.25 x 2 / omega_max
+MAX_CONTACT_HALVINGS = 20  # a Verlet step with self-contact is split into halves down to dt / 2^20
 # dynamic axial penalty of an inextensible rod, in units of each edge's inertial stiffness rho_A l / dt^2
 DYNAMIC_PENALTY = 100.0
 
@@ -515,7 +517,10 @@ def simulate(scene, t_end, dt=None, integrator="newmark", state=None, velocity=N
         at the start of the step, a friction force -mu N f1(|u|) u / |u| on its tangential velocity u over the
         step, f1 rising smoothly from 0 to 1 over the slip velocity. Self-contact (``der.self_contact``) is
         frictionless; its barrier joins the implicit step's Newton system as in ``der.solve`` (rho_inf = 0 is
-        advised for impacts: the trapezoidal rule can gain energy on the stiff barrier, docs/dynamics.md).
+        advised for impacts: the trapezoidal rule can gain energy on the stiff barrier, docs/dynamics.md). With
+        "verlet" its gradient is a force of the explicit step, each position update is proven non-crossing by
+        CCD and the step is split into halves where it is not, or where it exceeds a quarter of the elastic +
+        barrier stable step (at most 2^20 pieces, then status "contact_failed" naming the time and the pair).
     slip_velocity : float > 0, optional: the smoothing velocity eps_v (default 1e-3 edge lengths per step:
         h / (1000 dt)); a sticking contact creeps at most at about this speed.
     rho_inf : float in [0, 1], "newmark" only: the spectral radius at infinite frequency of the generalized-alpha
@@ -588,14 +593,6 @@ def simulate(scene, t_end, dt=None, integrator="newmark", state=None, velocity=N
         raise ValueError(f"der.simulate: rho_inf must be in [0, 1] (1: no numerical dissipation); got {rho_inf!r}")
     newton_tol = validate.positive_number(newton_tol, "der.simulate: newton_tol", "a finite number > 0")
     strain_tol = validate.positive_number(strain_tol, "der.simulate: strain_tol", "a finite number > 0")
-    from .terms.obstacles import Obstacle
-
-    if integrator == "verlet":
-        for term in scene.contacts:
-            if not isinstance(term, Obstacle):
-                raise ValueError("der.simulate: contacts: self-contact "
-                                 f"({type(term).__name__}) needs integrator='newmark' (its Hessian joins the "
-                                 "implicit step's Newton system)")
     friction = validate.real_number(friction, "der.simulate: friction", "a Coulomb coefficient >= 0")
     if not friction >= 0:
         raise ValueError(f"der.simulate: friction must be a Coulomb coefficient >= 0; got {friction!r}")
@@ -1130,6 +1127,12 @@ class _VerletRun(_Run):
             raise ValueError(f"der.simulate: dt = {dt:.3g} exceeds the stable explicit step {dt_stable:.3g} "
                              "(2 / omega_max with this mass); use integrator='newmark' or a smaller dt")
         self.dt = dt
+        self.contact_terms = self._self_contact_terms()
+        for term in self.contact_terms:
+            # a fixed potential (a stiffness raised during an impact would add energy): IPC's upper bound
+            if term.adaptive:
+                term.kappa = term.kappa_max
+        self.contact_halvings = 0
         self.w = np.where(sysm.fixed, 0.0, 1.0 / sysm.mass)
         if self.inext:
             from .solvers.projection import project_velocity
@@ -1149,11 +1152,92 @@ class _VerletRun(_Run):
         _zero_fixed(ab, sysm)
         m = sysm.mass.copy()
         bound = float(_gershgorin(ab, sysm.kl, sysm.ku, sysm.perm, m))
+        self.omega2 = max(bound, 0.0)
         if bound <= 0:
             return math.inf
         return 2.0 / math.sqrt(bound)
 
+    def _self_contact_terms(self):
+        from .terms.obstacles import BoundObstacle
+
+        return [t for t in self.system.terms if not isinstance(t, BoundObstacle)]
+
+    def _barrier_omega2(self):
+        """A Gershgorin bound of omega^2 of the self-contact barrier at the current state: max_i sum_j |H_ij| /
+        sqrt(m_i m_j) over the free DOFs of the (PSD-projected, so larger in the Loewner order) barrier Hessian H
+        of the active pairs; 0 when no pair is within dhat."""
+        terms = self.contact_terms
+        if not any(t.n_active for t in terms):
+            return 0.0
+        coo = []
+        g = np.zeros(self.rod.n_dof)
+        for t in terms:
+            t.project = True
+            t.evaluate(self.state, 2, g, None, coo)
+        if not coo:
+            return 0.0
+        rows = np.concatenate([c[0] for c in coo])
+        cols = np.concatenate([c[1] for c in coo])
+        vals = np.concatenate([c[2] for c in coo])
+        m = self.model.mass
+        free = ~self.held
+        keep = free[rows] & free[cols] & (m[rows] > 0) & (m[cols] > 0)
+        rows, cols, vals = rows[keep], cols[keep], vals[keep]
+        if rows.size == 0:
+            return 0.0
+        s = np.zeros(self.rod.n_dof)
+        np.add.at(s, rows, np.abs(vals) / np.sqrt(m[rows] * m[cols]))
+        return float(s.max())
+
     def step(self, t1):
+        """One step to t1. With self-contact (module docs): the step is split into halves (at most
+        MAX_CONTACT_HALVINGS deep) until each piece is below the stable step of the elastic plus barrier stiffness
+        at its start and its position update is proven non-crossing by CCD."""
+        if not self.contact_terms:
+            return self._step(t1)
+        return self._contact_step(t1, 0)
+
+    def _contact_step(self, t1, depth):
+        dt = self.dt
+        t0 = t1 - dt
+        why = None
+        omega2 = self.omega2 + self._barrier_omega2()
+        if omega2 > 0 and dt > CONTACT_STEP_FRACTION * 2.0 / math.sqrt(omega2):
+            why = "stiff"
+        else:
+            saved = (self.state, self.v, self.a, self.work, self.dissipated, self.power, self.F_load)
+            ok, why = self._step(t1)
+            if ok:
+                # the barrier stiffens as the gap closes: the step must be stable at its end as well
+                omega2 = self.omega2 + self._barrier_omega2()
+                if not (omega2 > 0 and dt > CONTACT_STEP_FRACTION * 2.0 / math.sqrt(omega2)):
+                    return True, None
+                (self.state, self.v, self.a, self.work, self.dissipated, self.power, self.F_load) = saved
+                why = "stiff"
+            elif why[0] != "ccd":
+                return ok, why
+        if depth >= MAX_CONTACT_HALVINGS:
+            if why == "stiff":
+                d = self.contact_terms[0].diagnostics(self.state)
+                return False, ("contact_failed", f"velocity Verlet: the self-contact barrier's stable step is below "
+                               f"dt / 2^{MAX_CONTACT_HALVINGS} = {dt:.3g} at t = {t0:g} (closest pair: edges "
+                               f"{d['min_distance_edges']}, centrelines {d['min_distance']:.6g} apart); reduce dt "
+                               "or use integrator='newmark'")
+            return False, ("contact_failed", f"velocity Verlet: no step of dt / 2^{MAX_CONTACT_HALVINGS} = {dt:.3g} "
+                           f"from t = {t0:g} is proven free of crossing by CCD ({why[1]}); reduce dt or use "
+                           "integrator='newmark'")
+        self.contact_halvings += 1
+        self.set_dt(0.5 * dt)
+        try:
+            for t in (t0 + 0.5 * dt, t1):
+                ok, why2 = self._contact_step(t, depth + 1)
+                if not ok:
+                    return ok, why2
+        finally:
+            self.set_dt(dt)
+        return True, None
+
+    def _step(self, t1):
         from .solvers.projection import project_positions, project_velocity
         from .solvers.system import move_supports, transport
         from .constraints import enforce_links
@@ -1179,6 +1263,10 @@ class _VerletRun(_Run):
         elif sysm.links.dep.size:
             enforce_links(q1, sysm.links)
         v_half = (q1 - s0.q) / dt
+        for term in self.contact_terms:         # no passage: the straight path q0 -> q1 proven safe by CCD
+            if term.max_step(s0, q1 - s0.q) < 1.0:
+                pair = getattr(term, "ccd_pair", None)
+                return False, ("ccd", f"edges {pair} at t = {t1 - dt:g}" if pair else f"at t = {t1 - dt:g}")
         trial = s0.copy()
         if not transport(sysm, s0, q1, trial):
             return False, ("nonfinite", f"an edge reversed at t = {t1:g}; reduce dt")

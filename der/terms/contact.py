@@ -385,6 +385,7 @@ class BoundSelfContact(BoundBarrier):
         pairs = self.candidates(pos, pos + dpos)
         tau, worst, _ = self.C.pairs_ccd(pos, dpos, self.topo.edges, pairs, self.topo.edge_radius, MIN_GAP_FRACTION,
                                          1e-6, 10000)
+        self.ccd_pair = (int(pairs[worst, 0]), int(pairs[worst, 1])) if tau < 1.0 and worst >= 0 else None
         if self.samples is not None and tau > 0.0:
             # the sampled barrier stays finite: every sample pair keeps 10 % of its gap as well
             tau_s, _ = self.S.sampled_ccd(pos, dpos, self.topo.edges, pairs, self.topo.edge_radius, self.edge_len,

@@ -111,22 +111,6 @@ def edge_array(q, edge_nodes, q_lo=None):
 
 
 @njit(cache=True)
-def add_compensated(q, q_lo, a, delta, out, out_lo):
-    """``(out, out_lo) <- (q, q_lo) + a delta`` as compensated pairs (TwoSum, then renormalised so that
-    |out_lo| <= ulp(out) / 2): the step is added to the position without losing the part of it below the
-    rounding of the coordinate. ``out`` may be ``q`` (and ``out_lo`` ``q_lo``)."""
-    for i in range(q.shape[0]):
-        s = a * delta[i]
-        hi = q[i] + s
-        bb = hi - q[i]
-        err = (q[i] - (hi - bb)) + (s - bb)
-        lo = q_lo[i] + err
-        h2 = hi + lo
-        out_lo[i] = lo - (h2 - hi)
-        out[i] = h2
-
-
-@njit(cache=True)
 def add_compensated_one(q, q_lo, i, s):
     """``(q[i], q_lo[i]) += s`` as a compensated pair (one coordinate of ``add_compensated``): the step kept to
     the rounding of the low part, for kernels that move coordinates one at a time (the explicit solver)."""
@@ -137,6 +121,19 @@ def add_compensated_one(q, q_lo, i, s):
     h2 = hi + lo
     q_lo[i] = lo - (h2 - hi)
     q[i] = h2
+
+
+@njit(cache=True)
+def add_compensated(q, q_lo, a, delta, out, out_lo):
+    """``(out, out_lo) <- (q, q_lo) + a delta`` as compensated pairs (TwoSum, then renormalised so that
+    |out_lo| <= ulp(out) / 2): the step is added to the position without losing the part of it below the
+    rounding of the coordinate. ``out`` may be ``q`` (and ``out_lo`` ``q_lo``)."""
+    for i in range(q.shape[0]):
+        out[i] = q[i]
+        out_lo[i] = q_lo[i]
+        add_compensated_one(out, out_lo, i, a * delta[i])
+
+
 
 
 @njit(cache=True)

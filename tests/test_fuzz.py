@@ -44,3 +44,14 @@ def test_classifier_catches_a_false_verdict():
         assert classify(case, limit=0.5)[0] == "other"
     finally:
         fuzzing.build = original
+
+
+def test_rings_of_three_and_four_edges_solve_and_are_analysed():
+    """Found by `tools/fuzz.py --examples 5000` (12 cases): on a ring of 3 or 4 edges the band is wider than the
+    matrix, and the stability analysis's symmetry check sliced past its end (a numpy broadcast error)."""
+    for n, EA in ((3, None), (3, 1e4), (4, None)):
+        case = {"kind": "ring", "n": n, "radius": 1.0, "A1": 1.0, "A2": 1.0, "EA": EA, "loads": [],
+                "constraints": [], "perturb": 0.0, "seed": 0, "solver": "implicit", "tol": 1e-8,
+                "max_iterations": 100, "max_steps": 100}
+        outcome, detail, _ = classify(case)
+        assert outcome in ("converged", "converged_at_floor"), f"n = {n}, EA = {EA}: {outcome} {detail}"

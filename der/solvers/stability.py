@@ -347,6 +347,8 @@ class _BandOperator:
         nb = self.nb
         for d in range(-self.ku, self.kl + 1):        # A[j + d, j] = diag[ku + d, j]
             j0, j1 = max(0, -d), min(nb, nb - d)
+            if j1 <= j0:                              # a band wider than the matrix (a ring of 3 edges)
+                continue
             a = self.diag[self.ku + d, j0:j1]
             if absolute:
                 a = np.abs(a)
@@ -383,7 +385,7 @@ class _BandOperator:
         freeb = np.zeros(self.nb, dtype=bool)
         freeb[self.pos] = True
         kmax = asym = 0.0
-        for d in range(0, self.kl + 1):
+        for d in range(0, min(self.kl, self.nb - 1) + 1):     # a band wider than the matrix (a ring of 3 edges)
             mask = freeb[:self.nb - d] & freeb[d:]
             low = self.diag[self.ku + d, :self.nb - d][mask]     # A[j + d, j]
             up = self.diag[self.ku - d, d:][mask]                # A[j, j + d]

@@ -28,9 +28,11 @@ from numba import njit
 from ..geometry import add_compensated_one, edge_array, transport_frames
 from ..linalg import condense_vector
 from ..scene import evaluate, make_plan
-from .projection import held_strain, inverse_mass, project_force, project_positions, project_velocity
+from .projection import (
+    held_strain, inverse_mass, project_force, project_positions, project_velocity, tension_energy,
+)
 from .system import (
-    FLOOR_FACTOR, FLOOR_MAX, INTERRUPTS, constrain_system, energy_terms, evaluate_system, final_result,
+    FLOOR_FACTOR, FLOOR_MAX, INTERRUPTS, condense_forces, constrain_system, energy_terms, evaluate_system, final_result,
     is_interrupt, load_scales, residual_floor, max_strain, newton_error_estimate, residual_norm, residual_vector, state_edges, transport,
 )
 
@@ -112,6 +114,8 @@ def _fire_run(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, inv_scale
     tw_old = twist.copy()
     f = np.zeros(n)
     energy = evaluate(plan, q, d1, twist, lam, 1, grad, fext, ab, kl, ku, perm, q_lo)
+    if project:
+        energy += tension_energy(q, plan.edge_nodes, plan.l_bar, lam, q_lo)
     residual = np.inf
     rejected = 0
     for step in range(n_steps):
@@ -119,7 +123,8 @@ def _fire_run(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, inv_scale
         for i in range(n):
             f[i] = fext[i] - grad[i]
         condense_vector(f, tri_dep, tri_master, tri_coef, fixed)   # end supports: forces on the free variables
-        if project and not project_force(q, plan.edge_nodes, plan.l_bar, w, closed, f, lam, q_lo):
+        if project and not project_force(q, plan.edge_nodes, plan.l_bar, w, closed, f, lam, q_lo,
+                                                 tri_dep, tri_master, tri_coef):
             return STATUS_NONFINITE, step, residual, dt, alpha, n_pos, e_total, work_done, rejected, dt_max
         for i in range(n):
             r = abs(f[i]) * inv_scale[i]
@@ -170,11 +175,13 @@ def _fire_run(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, inv_scale
         ok = True
         if project:
             # positions back onto |e_j| = l_j (a step of dt v leaves a strain O(dt^2 v^2 / l^2)); the velocity made
-            # tangent there (RATTLE: the normal part, the constraint impulse, is removed). With an inextensible
-            # rod the supports hold their end edges rigidly (no coupled links: see solve_explicit)
-            ok = project_positions(q, plan.edge_nodes, plan.l_bar, w, closed, 20, target, q_lo) <= max_strain
+            # tangent there (RATTLE: the normal part, the constraint impulse, is removed). End supports: all
+            # three in the free variables (projection.py), the dependents following the masters
+            ok = project_positions(q, plan.edge_nodes, plan.l_bar, w, closed, 20, target, q_lo, tri_dep,
+                                   tri_master, tri_coef) <= max_strain
             if ok:
-                ok = project_velocity(q, plan.edge_nodes, plan.l_bar, w, closed, v, q_lo)
+                ok = project_velocity(q, plan.edge_nodes, plan.l_bar, w, closed, v, q_lo, tri_dep, tri_master,
+                                      tri_coef)
         ok = ok and transport_frames(q, plan.edge_nodes, plan.vertex_edges, t_old, d1_old, tw_old, tangents, d1,
                                      twist, edge_array(q, plan.edge_nodes, q_lo))
         fext_old_dot = 0.0
@@ -183,6 +190,8 @@ def _fire_run(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, inv_scale
         new_energy = np.inf
         if ok:
             new_energy = evaluate(plan, q, d1, twist, lam, 1, grad, fext, ab, kl, ku, perm, q_lo)
+            if project:       # the Lagrangian E + lam . g (projection.tension_energy)
+                new_energy += tension_energy(q, plan.edge_nodes, plan.l_bar, lam, q_lo)
         kinetic = 0.0
         fext_new_dot = 0.0
         for i in range(n):
@@ -212,6 +221,8 @@ def _fire_run(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, inv_scale
             alpha = alpha0
             n_pos = 0
             energy = evaluate(plan, q, d1, twist, lam, 1, grad, fext, ab, kl, ku, perm, q_lo)
+            if project:
+                energy += tension_energy(q, plan.edge_nodes, plan.l_bar, lam, q_lo)
             e_total = energy - work_done
             continue
         energy = new_energy
@@ -254,10 +265,6 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
     proj_strain = max(min(1e-3 * strain_tol, 1e-10), PROJECTION_TARGET)
     plan = system.plan
     t_start = time.perf_counter()
-    if project and system.links.tri_dep.size:
-        raise ValueError("the explicit solver cannot yet hold an inextensible rod by a hinge, a roller or a sliding "
-                         "clamp (their end edges move with coupled coordinates, which its length projection does not "
-                         "handle); use solver='implicit', or give the rod EA")
     if project:
         # the penalty is not used: the plan's stretch term keeps only the multiplier (for the residual, the load
         # scale and the tension's geometric stiffness in the stable step); the kernel runs without it
@@ -265,14 +272,16 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
         state.penalty = system.plan.k_stretch.copy()
         plan = system.plan._replace(has_stretch=False)
         base = state.copy()
+        lk = system.links
         if not project_positions(state.q, rod.edge_nodes, rod.l_bar, w, rod.closed, 100, PROJECTION_TARGET,
-                                 state.q_lo) <= proj_strain or not transport(system, base, state.q, state):
+                                 state.q_lo, lk.tri_dep, lk.tri_master, lk.tri_coef) <= proj_strain or not transport(
+                                     system, base, state.q, state):
             _restore_penalty(system, state)
             raise ValueError("the starting state cannot be projected onto the inextensible rod's edge lengths "
                              "(its edges are too far from their rest lengths, or fixed nodes hold an edge at "
                              "another length); start closer to the rest shape or give the rod EA")
         _initial_tension(system, state, w)
-        held, held_eps = held_strain(rod, state, w)
+        held, held_eps = held_strain(rod, state, w, system.links)
         if held.size and held_eps.max() > strain_tol:
             # no step can change these lengths: the solve cannot end with strain <= strain_tol, say so now
             j = int(held[np.argmax(held_eps)])
@@ -332,6 +341,8 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
                                         system.fext, system.ab, system.kl, system.ku, system.perm, state.q_lo))
                 if contact is not None:
                     energy += contact.energy(state)
+                if project:
+                    energy += tension_energy(state.q, rod.edge_nodes, rod.l_bar, state.lam, state.q_lo)
                 e_total = energy + 0.5 * float(system.mass @ v ** 2) - work_done
             n = _chunk_steps(options, steps, step_cost, time.perf_counter() - t_start)
             t_chunk = time.perf_counter()
@@ -481,11 +492,12 @@ def _initial_tension(system, state, w):
     geometric stiffness, and after each kernel call, so that the residual checked is the projected one."""
     evaluate_system(system, state, 1)
     f = system.fext - system.grad
-    f[system.fixed] = 0.0
     # the plan still has the multiplier term: remove it from the force before projecting
     _add_lam_force(system, state, f)
-    rod = system.rod
-    project_force(state.q, rod.edge_nodes, rod.l_bar, w, rod.closed, f, state.lam, state.q_lo)
+    condense_forces(system, f)      # the force on the free variables (end supports' links)
+    rod, lk = system.rod, system.links
+    project_force(state.q, rod.edge_nodes, rod.l_bar, w, rod.closed, f, state.lam, state.q_lo, lk.tri_dep,
+                  lk.tri_master, lk.tri_coef)
 
 
 def _add_lam_force(system, state, f):
@@ -499,7 +511,6 @@ def _add_lam_force(system, state, f):
     np.add.at(F, rod.edge_nodes[:, 1], h)
     g = f.reshape(-1, 4)
     g[:, :3] += F
-    f[system.fixed] = 0.0
 
 
 def _restore_penalty(system, state):

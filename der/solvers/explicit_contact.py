@@ -28,7 +28,7 @@ from ..geometry import add_compensated_one, edge_array, transport_frames
 from ..linalg import condense_vector
 from ..scene import evaluate
 from .explicit import NOISE_FACTOR, STATUS_CONVERGED, STATUS_NONFINITE, STATUS_RUNNING, _follow_links
-from .projection import project_force, project_positions, project_velocity
+from .projection import project_force, project_positions, project_velocity, tension_energy
 
 STATUS_REBUILD = 3
 MIN_GAP_FRACTION = 0.1       # as the implicit solver's line search (der/terms/contact.py)
@@ -118,6 +118,8 @@ def fire_run_contact(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, in
     dpos = np.empty((n_nodes, 3))
     energy = _forces(plan, q, q_lo, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius, dhat,
                      kappa)
+    if project:
+        energy += tension_energy(q, plan.edge_nodes, plan.l_bar, lam, q_lo)
     residual = np.inf
     rejected = 0
     ccd_rejected = 0
@@ -126,7 +128,8 @@ def fire_run_contact(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, in
         for i in range(n):
             f[i] = fext[i] - grad[i]
         condense_vector(f, tri_dep, tri_master, tri_coef, fixed)
-        if project and not project_force(q, plan.edge_nodes, plan.l_bar, w, closed, f, lam, q_lo):
+        if project and not project_force(q, plan.edge_nodes, plan.l_bar, w, closed, f, lam, q_lo,
+                                                 tri_dep, tri_master, tri_coef):
             return (STATUS_NONFINITE, step, residual, dt, alpha, n_pos, e_total, work_done, rejected, dt_max,
                     ccd_rejected)
         for i in range(n):
@@ -176,9 +179,11 @@ def fire_run_contact(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, in
         _follow_links(q, q_lo, link_dep, link_const, tri_dep, tri_master, tri_coef)
         ok = True
         if project:
-            ok = project_positions(q, plan.edge_nodes, plan.l_bar, w, closed, 20, target, q_lo) <= max_strain
+            ok = project_positions(q, plan.edge_nodes, plan.l_bar, w, closed, 20, target, q_lo, tri_dep,
+                                   tri_master, tri_coef) <= max_strain
             if ok:
-                ok = project_velocity(q, plan.edge_nodes, plan.l_bar, w, closed, v, q_lo)
+                ok = project_velocity(q, plan.edge_nodes, plan.l_bar, w, closed, v, q_lo, tri_dep, tri_master,
+                                      tri_coef)
         if ok and _max_shift(q, x_ref) > margin:
             if not (fresh and step == 0):
                 # the pair list no longer covers this step: end the call at the last accepted state
@@ -209,6 +214,8 @@ def fire_run_contact(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, in
         if ok:
             new_energy = _forces(plan, q, q_lo, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius,
                                  dhat, kappa)
+            if project:       # the Lagrangian E + lam . g (projection.tension_energy)
+                new_energy += tension_energy(q, plan.edge_nodes, plan.l_bar, lam, q_lo)
         kinetic = 0.0
         fext_new_dot = 0.0
         for i in range(n):
@@ -233,6 +240,8 @@ def fire_run_contact(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, in
             n_pos = 0
             energy = _forces(plan, q, q_lo, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius, dhat,
                              kappa)
+            if project:
+                energy += tension_energy(q, plan.edge_nodes, plan.l_bar, lam, q_lo)
             e_total = energy - work_done
             continue
         energy = new_energy

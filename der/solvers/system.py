@@ -636,7 +636,7 @@ def state_edges(system, state):
 def state_elongations(system, state):
     """g_j = |e_j| - l_j of ``state``'s edges (compensated positions)."""
     rod = system.rod
-    return elongations(state.q, rod.edge_nodes, rod.l_bar, state_edges(system, state))
+    return elongations(state.q, rod.edge_nodes, rod.l_bar, edge_array(state.q, rod.edge_nodes, state.q_lo, True))
 
 
 def max_strain(system, state):
@@ -808,9 +808,9 @@ def energy_terms(system, state):
     out = {}
     if plan.has_stretch:
         out["stretch"] = float(stretch_energy(state.q, rod.edge_nodes, rod.l_bar, plan.k_stretch, state.lam,
-                                              state_edges(system, state)))
+                                              edge_array(state.q, rod.edge_nodes, state.q_lo, True)))
     if plan.has_bend:
-        ed = edge_frames(state.q, rod.edge_nodes, state.d1, state_edges(system, state))
+        ed = edge_frames(state.q, rod.edge_nodes, state.d1, edge_array(state.q, rod.edge_nodes, state.q_lo, True))
         out["bend"] = float(bend_energy(ed, rod.vertex_edges, plan.weld, plan.kappa_bar, rod.voronoi, plan.A1))
     if plan.has_twist:
         out["twist"] = float(twist_energy(state.q, rod.vertex_edges, state.reference_twist, plan.weld, rod.twist_bar,

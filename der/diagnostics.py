@@ -454,7 +454,7 @@ def _edge_forces(q, d1, reference_twist, lam, edge_nodes, vertex_nodes, vertex_e
     g8 = np.empty(8)
     H8 = np.empty((8, 8))
     work = np.empty((5, 8))
-    E = edge_array(q, edge_nodes, q_lo)
+    E = edge_array(q, edge_nodes, q_lo, True)
     ed = edge_frames(q, edge_nodes, d1, E)
     if has_stretch:
         for j in range(n):

@@ -15,7 +15,7 @@ All angles are in radians, right-handed.
 import numpy as np
 from numba import njit
 
-from .stencils import edge_dofs, scatter_band, vangle, vcross, vdot, vec, vnorm, vscale, vsub, vtransport
+from .stencils import edge_dofs, scatter_band, two_sum, vangle, vcross, vdot, vec, vnorm, vscale, vsub, vtransport
 
 # ---------------------------------------------------------------------------------------------
 # small vector helpers (3-vectors as length-3 arrays)
@@ -88,7 +88,7 @@ def edge_vector(q, edge_nodes, j):
 
 
 @njit(cache=True)
-def edge_array(q, edge_nodes, q_lo=None):
+def edge_array(q, edge_nodes, q_lo=None, lo=False):
     """Edge vectors ``e_j = x_b - x_a`` of all edges, shape (n_edges, 3): the one place where the solvers form
     edges from positions (every kernel that needs edges takes this array).
 
@@ -96,17 +96,29 @@ def edge_array(q, edge_nodes, q_lo=None):
     (``RodState.q_lo``, |q_lo| <= ulp(q) / 2): ``e = (q_b - q_a) + (lo_b - lo_a)``. The difference of the high
     parts of neighbouring nodes is exact or rounded relative to the edge itself, so an edge carries the rounding
     of its own length (eps |e|) rather than that of the coordinates (eps |x|, issue 17): a rod far from the origin,
-    or long against its edges, keeps the relative accuracy of its deformation."""
+    or long against its edges, keeps the relative accuracy of its deformation.
+
+    With ``lo`` the array has 6 columns: the same rounded edge (bitwise) and, in columns 3-5, its low part, the
+    exact ``(q_b - q_a) + (lo_b - lo_a)`` minus the rounded edge (TwoSum): what the kernels need to form the
+    curvature and the elongation without cancellation (``stencils.curvature_binormal_of``,
+    ``stencils.elongation``). Every kernel reads columns 0-2 as the edge."""
     n = edge_nodes.shape[0]
-    out = np.empty((n, 3))
+    out = np.empty((n, 6 if lo else 3))
     for j in range(n):
         a = 4 * edge_nodes[j, 0]
         b = 4 * edge_nodes[j, 1]
         for k in range(3):
             if q_lo is None:
                 out[j, k] = q[b + k] - q[a + k]
+                if lo:
+                    out[j, k], out[j, 3 + k] = two_sum(q[b + k], -q[a + k])
             else:
-                out[j, k] = (q[b + k] - q[a + k]) + (q_lo[b + k] - q_lo[a + k])
+                hi, err = two_sum(q[b + k], -q[a + k])
+                d = q_lo[b + k] - q_lo[a + k]
+                out[j, k] = hi + d       # = (q_b - q_a) + (lo_b - lo_a), as without ``lo``
+                if lo:
+                    s, err2 = two_sum(hi, d)
+                    out[j, 3 + k] = err2 + err
     return out
 
 
@@ -198,22 +210,22 @@ def material_frames(q, t, d1):
 
 @njit(cache=True)
 def edge_frames(q, edge_nodes, d1, E=None):
-    """Per-edge data shared by the bending and twisting kernels, shape (n_edges, 10):
-    ``[t (3), |e|, m1 (3), m2 (3)]`` -- one pass, one sine and cosine per edge. The edges are ``E``
-    (``edge_array``) when given, else formed from ``q``; the angles theta always come from ``q``."""
+    """Per-edge data shared by the bending and twisting kernels, shape (n_edges, 16):
+    ``[t (3), |e|, m1 (3), m2 (3), e (3), e_lo (3)]`` -- one pass, one sine and cosine per edge. The edges are
+    ``E`` (``edge_array``) when given, else formed from ``q`` (with their low parts, as ``edge_array(q, ...,
+    lo=True)``); ``e_lo`` is the low part of the edge (columns 3-5 of a 6-column ``E``, else 0), from which the
+    kernels form the curvature binormal without cancellation (``stencils.curvature_binormal_of``). The angles
+    theta always come from ``q``."""
     n = edge_nodes.shape[0]
-    out = np.empty((n, 10))
+    out = np.empty((n, 16))
+    Ee = edge_array(q, edge_nodes, None, True) if E is None else E
     for j in range(n):
-        if E is None:
-            a = 4 * edge_nodes[j, 0]
-            b = 4 * edge_nodes[j, 1]
-            e0 = q[b] - q[a]
-            e1 = q[b + 1] - q[a + 1]
-            e2 = q[b + 2] - q[a + 2]
-        else:
-            e0 = E[j, 0]
-            e1 = E[j, 1]
-            e2 = E[j, 2]
+        e0 = Ee[j, 0]
+        e1 = Ee[j, 1]
+        e2 = Ee[j, 2]
+        for k in range(3):
+            out[j, 10 + k] = Ee[j, k]
+            out[j, 13 + k] = Ee[j, 3 + k] if Ee.shape[1] >= 6 else 0.0
         le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
         t0, t1, t2 = e0 / le, e1 / le, e2 / le
         p0, p1, p2 = d1[j, 0], d1[j, 1], d1[j, 2]

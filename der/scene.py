@@ -284,7 +284,7 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
     ``F``, ``M``: with order 1 and all three terms, filled with ``diagnostics._edge_forces`` of the state (the
     solver's load scale) in the same pass; untouched otherwise (check ``edge_forces_in_pass``).
     """
-    E = edge_array(q, plan.edge_nodes, q_lo)
+    E = edge_array(q, plan.edge_nodes, q_lo, True)   # with their low parts (curvature, elongation)
     grad[:] = 0.0
     fext[:] = 0.0
     if order >= 2:
@@ -306,7 +306,7 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
     if plan.has_bend or (plan.has_twist and order >= 1):
         ed = edge_frames(q, plan.edge_nodes, d1, E)   # one pass over edges, shared by bending and twisting
     else:
-        ed = np.empty((0, 10))
+        ed = np.empty((0, 16))
     if full:
         plan.counters[0] += 1
         plan.counters[1] += 1

@@ -191,6 +191,77 @@ def edge_vectors(ed, j):
             (ed[j, 7], ed[j, 8], ed[j, 9]))
 
 
+# ---- compensated arithmetic (issue 17): the curvature and the elongation without cancellation ----
+# An edge is carried as a pair (E, E_lo), the rounded vector and its low part (``geometry.edge_array`` with
+# ``lo=True``, ``geometry.edge_frames`` columns 10-15). A quantity that is a small difference of two edge-sized
+# numbers -- the turning f - e of two neighbouring edges, the elongation |e| - l -- is formed from both parts
+# with error-free transformations, so that it carries the rounding of its own size and not eps |e|.
+
+@njit(cache=True, inline="always")
+def two_sum(a, b):
+    """(s, err) with s = fl(a + b) and a + b = s + err exactly (Knuth's TwoSum)."""
+    s = a + b
+    bb = s - a
+    return s, (a - (s - bb)) + (b - bb)
+
+
+@njit(cache=True, inline="always")
+def _split(a):
+    c = 134217729.0 * a          # 2^27 + 1 (Dekker)
+    hi = c - (c - a)
+    return hi, a - hi
+
+
+@njit(cache=True, inline="always")
+def two_prod(a, b):
+    """(p, err) with p = fl(a b) and a b = p + err exactly (Dekker's product, no FMA needed)."""
+    p = a * b
+    ah, al = _split(a)
+    bh, bl = _split(b)
+    return p, ((ah * bh - p) + ah * bl + al * bh) + al * bl
+
+
+@njit(cache=True, inline="always")
+def elongation(E, j, l_bar):
+    """(g, |e|): the elongation g = |e_j| - l_bar of edge j and its length. With the low parts (``E`` of 6
+    columns, ``geometry.edge_array(..., lo=True)``) g = (|e|^2 - l^2) / (|e| + l), the difference of squares
+    formed exactly (TwoProd, TwoSum): g then carries the rounding of its own size, not that of |e| (eps |e|, which
+    the axial penalty c A1 / h^3 turns into a tension eps c A1 / h^2 and a residual floor growing like n). With 3
+    columns the plain |e| - l."""
+    e0 = E[j, 0]
+    e1 = E[j, 1]
+    e2 = E[j, 2]
+    le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    if E.shape[1] < 6:
+        return le - l_bar, le
+    p0, r0 = two_prod(e0, e0)
+    p1, r1 = two_prod(e1, e1)
+    p2, r2 = two_prod(e2, e2)
+    s, c1 = two_sum(p0, p1)
+    s, c2 = two_sum(s, p2)
+    ll, rl = two_prod(l_bar, l_bar)
+    d, c3 = two_sum(s, -ll)
+    lo = (r0 + r1 + r2 + c1 + c2 + c3 - rl) + 2.0 * (e0 * E[j, 3] + e1 * E[j, 4] + e2 * E[j, 5])
+    return (d + lo) / (le + l_bar), le
+
+
+@njit(cache=True, inline="always")
+def curvature_binormal_of(ed, je, jf):
+    """Curvature binormal ``kb = 2 t_e x t_f / (1 + t_e . t_f)`` of the vertex joining edges ``je`` (e) and ``jf``
+    (f), from an ``edge_frames`` array, in the cancellation-free form ``2 e x (f - e) / (|e||f| + e . f)``: the
+    turning ``f - e`` is formed from the high and low parts of the two edges (columns 10-15; TwoSum), so kb has
+    the relative accuracy of its own size (|kb| ~ h kappa). From unit tangents it carried eps absolute, which a
+    bending force A1 / h^2 turns into a residual floor growing like n (issue 17)."""
+    d0h, d0l = two_sum(ed[jf, 10], -ed[je, 10])
+    d1h, d1l = two_sum(ed[jf, 11], -ed[je, 11])
+    d2h, d2l = two_sum(ed[jf, 12], -ed[je, 12])
+    d = (d0h + (d0l + (ed[jf, 13] - ed[je, 13])), d1h + (d1l + (ed[jf, 14] - ed[je, 14])),
+         d2h + (d2l + (ed[jf, 15] - ed[je, 15])))
+    e = (ed[je, 10], ed[je, 11], ed[je, 12])
+    f = (ed[jf, 10], ed[jf, 11], ed[jf, 12])
+    return vscale(2.0 / (ed[je, 3] * ed[jf, 3] + vdot(e, f)), vcross(e, d))
+
+
 @njit(cache=True, inline="always")
 def scatter_vertex_gradient(grad, k0, k1, k2, ie, jf, g8):
     """Add the local gradient in (e, f, theta_e, theta_f) to the nodes k0, k1, k2 and edges ie, jf

@@ -41,9 +41,75 @@ def test_edge_array_forms_edges_from_both_parts():
         for c in range(3):
             exact = x[b][c] - x[a][c]
             assert abs(Fraction(E[j, c]) - exact) <= abs(exact) * Fraction(2.3e-16) + Fraction(1e-300)
-    # without low parts: the plain differences, bitwise what edge_frames forms itself
+    # without low parts: the plain differences (with their TwoSum low parts), bitwise what edge_frames forms itself
     assert np.array_equal(edge_frames(q, rod.edge_nodes, rod.rest_d1),
-                          edge_frames(q, rod.edge_nodes, rod.rest_d1, edge_array(q, rod.edge_nodes)))
+                          edge_frames(q, rod.edge_nodes, rod.rest_d1, edge_array(q, rod.edge_nodes, None, True)))
+    # with ``lo`` the same rounded edges and, beside them, what they rounded away: the pair is exact to the
+    # rounding of the low parts' difference (eps ulp(x), 2e-26 here), a million times below the edge's own
+    E6 = edge_array(q, rod.edge_nodes, lo, True)
+    assert np.array_equal(E6[:, :3], E)
+    for j, (a, b) in enumerate(rod.edge_nodes):
+        for c in range(3):
+            exact = x[b][c] - x[a][c]
+            assert abs(Fraction(E6[j, c]) + Fraction(E6[j, 3 + c]) - exact) <= Fraction(2.3e-16 * 2e-10)
+
+
+def _ring_torsion(n, T):
+    A1, A2, a0, L = 1.0, 1.0 / 0.67, 1.0, 3.0
+    rod = der.rod_from_shape(der.shapes.arc(a0, L, n), A1, A2)
+    scene = der.Scene(rod, loads=[der.end_torque(T * cf.ring_end_basis(a0, L)[0])], constraints=[der.clamp("start")])
+    return rod, scene, cf.ring_end_rotation(A1, A2, a0, L, T)
+
+
+def test_forces_are_smooth_below_the_rounding_of_the_edges():
+    # issue 17, the ring's floor: the curvature binormal was formed from unit tangents (eps absolute against its
+    # size h kappa) and the elongation as |e| - l (eps |e|): both jumped by a rounding step whenever an edge did,
+    # and the bending (A1 / h^3) and axial penalty (c A1 / h^3) stiffnesses turned the jumps into a force noise
+    # growing like n. From the low parts of the edges both are smooth: moving the nodes by their edges' rounding
+    # changes the forces by K dx, the linear response, and little else.
+    from der.linalg import band_matvec
+    from der.solvers.system import transport
+
+    rod, scene, _ = _ring_torsion(120, 1e-3)
+    res = der.solve(scene, stability=False)
+    system = build_system(scene, SolverOptions())
+    s = prepare_state(system, res.state)
+    evaluate_system(system, s, 2)
+    f0 = system.grad - system.fext
+    le = np.linalg.norm(edge_array(s.q, rod.edge_nodes, s.q_lo), axis=1)
+    pos = np.zeros(rod.n_dof, dtype=bool)
+    pos.reshape(-1, 4)[:, :3] = True
+    pos &= ~system.fixed
+    rng = np.random.default_rng(5)
+    worst = 0.0
+    for _ in range(3):
+        dx = 0.5 * np.finfo(float).eps * le.min() * rng.choice([-1.0, 1.0], size=rod.n_dof) * pos
+        Kdx = np.empty(rod.n_dof)
+        band_matvec(system.ab, system.kl, system.ku, system.perm, dx, Kdx)
+        trial = s.copy()
+        trial.q_lo = s.q_lo + dx
+        assert transport(system, s, trial.q, trial)
+        evaluate_system(system, trial, 1)
+        df = system.grad - system.fext - f0
+        worst = max(worst, float(np.abs(df - Kdx)[pos].max() / np.abs(Kdx[pos]).max()))
+        evaluate_system(system, s, 2)
+    # measured: 0.57 before (jumps of eps |e| c A1 / h^3, as large as the response itself), 0.006 now (what is left
+    # is the reference twist's rounding from unit tangents, A2 eps kappa / h: flat in n against the torque's
+    # force scale T / h); the departure falls like 1 / |dx| (rounding) and not like |dx| (a wrong K)
+    assert worst < 0.05, worst
+
+
+def test_ring_torsion_under_a_small_torque_reaches_tol():
+    # the floor mechanism at n = 10^5 scaled down: the force noise of the old curvature and elongation, relative to
+    # the load, grew like eps A1 n / (T L); a torque 500 times smaller at n = 200 puts it where n = 10^5 had it
+    # (old code: converged_at_floor at about 1e-6). Now the residual reaches tol, and the end rotation is that of
+    # the closed form to the discretisation error (O(h^2): 1.7e-4 at n = 200 with T = 1e-3).
+    rod, scene, ref = _ring_torsion(200, 2e-6)
+    res = der.solve(scene, stability=False, tol=1e-8)
+    assert res.status == "converged" and res.residual <= 1e-8, res.message
+    from der import diagnostics as dg
+    err = np.linalg.norm(dg.end_motion(rod, res.state)[1] - ref) / np.linalg.norm(ref)
+    assert err < 5e-4, err
 
 
 def test_readme_example_converges_below_tol():

@@ -31,8 +31,8 @@ from numba import njit
 
 from .stiffness import bending_at
 from ..stencils import (
-    add_column, add_cross_matrix, add_identity, add_outer, add_sym_outer, edge_vectors, expand_vertex_hessian,
-    scatter_band, scatter_vertex_gradient, vadd, vcross, vdot, vertex_dofs, vscale, vsub,
+    add_column, add_cross_matrix, add_identity, add_outer, add_sym_outer, curvature_binormal_of, edge_vectors,
+    expand_vertex_hessian, scatter_band, scatter_vertex_gradient, vadd, vcross, vdot, vertex_dofs, vscale, vsub,
 )
 
 
@@ -52,7 +52,7 @@ def material_curvatures(ed, vertex_edges, weld, v):
     te, _, m1e, m2e = edge_vectors(ed, vertex_edges[v, 0])
     tf, _, m1f, m2f = edge_vectors(ed, vertex_edges[v, 1])
     m1f, m2f = welded(m1f, m2f, weld[v])
-    kb = vscale(2.0 / (1.0 + vdot(te, tf)), vcross(te, tf))
+    kb = curvature_binormal_of(ed, vertex_edges[v, 0], vertex_edges[v, 1])
     return vdot(kb, m2e), -vdot(kb, m1e), vdot(kb, m2f), -vdot(kb, m1f)
 
 
@@ -83,7 +83,7 @@ def _bend_energy_local(ed, vertex_edges, weld, v, kappa_bar, b1, b2):
     te, _, m1e, m2e = edge_vectors(ed, vertex_edges[v, 0])
     tf, _, m1f, m2f = edge_vectors(ed, vertex_edges[v, 1])
     m1f, m2f = welded(m1f, m2f, weld[v])
-    kb = vscale(2.0 / (1.0 + vdot(te, tf)), vcross(te, tf))
+    kb = curvature_binormal_of(ed, vertex_edges[v, 0], vertex_edges[v, 1])
     k1e = vdot(kb, m2e)
     k2e = -vdot(kb, m1e)
     k1f = vdot(kb, m2f)
@@ -112,7 +112,7 @@ def _bend_local(ed, vertex_edges, weld, v, kappa_bar, b1, b2, order, g8, H8, wor
     tf, lf, m1f, m2f = edge_vectors(ed, vertex_edges[v, 1])
     m1f, m2f = welded(m1f, m2f, weld[v])   # d/dtheta_f is unchanged: m1f' = m2f, m2f' = -m1f
     chi = 1.0 + vdot(te, tf)
-    kb = vscale(2.0 / chi, vcross(te, tf))
+    kb = curvature_binormal_of(ed, vertex_edges[v, 0], vertex_edges[v, 1])
     k1e = vdot(kb, m2e)
     k2e = -vdot(kb, m1e)
     k1f = vdot(kb, m2f)

@@ -15,18 +15,18 @@ import numpy as np
 from numba import njit
 
 from ..geometry import edge_array
-from ..stencils import edge_dofs, scatter_band, scatter_gradient
+from ..stencils import edge_dofs, elongation, scatter_band, scatter_gradient
 
 
 @njit(cache=True)
 def _stretch_local(E, j, l_bar, k, lam, order, g6, H6):
     """Energy of edge j; gradient ``g6`` in (x_a, x_b) with order >= 1, Hessian ``H6`` with order >= 2. ``E``:
-    the edge vectors (``geometry.edge_array``)."""
+    the edge vectors (``geometry.edge_array``; with their low parts, 6 columns, the elongation is formed without
+    cancellation, ``stencils.elongation``)."""
     e0 = E[j, 0]
     e1 = E[j, 1]
     e2 = E[j, 2]
-    le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-    g = le - l_bar
+    g, le = elongation(E, j, l_bar)
     energy = lam * g + 0.5 * k * g * g
     if order == 0:
         return energy
@@ -100,13 +100,11 @@ def stretch_hessian(q, edge_nodes, l_bar, k, lam, grad, ab, kl, ku, perm, E=None
 
 @njit(cache=True)
 def elongations(q, edge_nodes, l_bar, E=None):
-    """g_j = |e_j| - l_j for all edges (edges ``E`` from ``geometry.edge_array`` when given, else from q)."""
+    """g_j = |e_j| - l_j for all edges (edges ``E`` from ``geometry.edge_array`` when given, else from q; with
+    the low parts of the edges, as the energy kernels take them, without cancellation)."""
     Ee = edge_array(q, edge_nodes) if E is None else E
     n = edge_nodes.shape[0]
     out = np.empty(n)
     for j in range(n):
-        e0 = Ee[j, 0]
-        e1 = Ee[j, 1]
-        e2 = Ee[j, 2]
-        out[j] = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2) - l_bar[j]
+        out[j] = elongation(Ee, j, l_bar[j])[0]
     return out

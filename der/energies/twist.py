@@ -19,8 +19,8 @@ from numba import njit
 
 from .stiffness import twisting_at
 from ..stencils import (
-    add_cross_matrix, add_outer, add_sym_outer, edge_vectors, expand_vertex_hessian, scatter_band,
-    scatter_vertex_gradient, vadd, vcross, vdot, vertex_dofs, vscale,
+    add_cross_matrix, add_outer, add_sym_outer, curvature_binormal_of, edge_vectors, expand_vertex_hessian,
+    scatter_band, scatter_vertex_gradient, vadd, vcross, vdot, vertex_dofs, vscale,
 )
 
 
@@ -44,7 +44,7 @@ def _twist_local(q, ed, vertex_edges, reference_twist, weld, v, mbar, stiff, ord
     te, le, _, _ = edge_vectors(ed, vertex_edges[v, 0])
     tf, lf, _, _ = edge_vectors(ed, vertex_edges[v, 1])
     chi = 1.0 + vdot(te, tf)
-    kb = vscale(2.0 / chi, vcross(te, tf))
+    kb = curvature_binormal_of(ed, vertex_edges[v, 0], vertex_edges[v, 1])
     dm = work[0]
     for i in range(3):
         dm[i] = 0.5 * kb[i] / le

@@ -8,6 +8,9 @@ edges' own scatter. The math is that of ``energies.bend`` and ``energies.twist``
 """
 import numpy as np
 from numba import njit
+# numba's cache keys a kernel on its own file only: this file was edited with the compensated edges of
+# issue 17 (geometry.edge_array's low parts, stencils.curvature_binormal_of / elongation) so that its
+# kernels are compiled again with them.
 
 from ..geometry import edge_array
 from ..stencils import expand_vertex_hessian, scatter_band, scatter_vertex_gradient, vertex_dofs

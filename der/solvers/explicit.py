@@ -24,6 +24,9 @@ import time
 
 import numpy as np
 from numba import njit
+# numba's cache keys a kernel on its own file only: this file was edited with the compensated edges of
+# issue 17 (geometry.edge_array's low parts, stencils.curvature_binormal_of / elongation) so that its
+# kernels are compiled again with them.
 
 from ..geometry import add_compensated_one, edge_array, transport_frames
 from ..linalg import condense_vector

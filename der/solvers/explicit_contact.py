@@ -21,6 +21,9 @@ pairs (n_pairs, 2) edge indices, edge_radius (n_edges,), node_dof (n_nodes,) the
 """
 import numpy as np
 from numba import njit
+# numba's cache keys a kernel on its own file only: this file was edited with the compensated edges of
+# issue 17 (geometry.edge_array's low parts, stencils.curvature_binormal_of / elongation) so that its
+# kernels are compiled again with them.
 
 from ..contact.barrier import GAP, pair_barrier
 from ..contact.ccd import pairs_ccd

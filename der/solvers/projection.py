@@ -25,6 +25,9 @@ All kernels work on the flat state vector ``q`` (4 entries per node: x, y, z, th
 """
 import numpy as np
 from numba import njit
+# numba's cache keys a kernel on its own file only: this file was edited with the compensated edges of
+# issue 17 (geometry.edge_array's low parts, stencils.curvature_binormal_of / elongation) so that its
+# kernels are compiled again with them.
 
 from ..geometry import add_compensated_one, edge_array
 from ..linalg import expand_step

@@ -289,9 +289,14 @@ def lowest_modes(system, state, n_eigenvalues=6, dense_max=DENSE_MAX_DOFS, edge=
     if getattr(system, "contact_coo", None) or system.kl != system.ku:
         # contact (issue 14): the off-band barrier Hessian joins the band; a sparse matrix on the free DOFs
         K = _sparse_free(system, idx)
-    else:
+    elif ez is None:
         K = _BandOperator(system, idx)     # the band itself: no sparse copy (O(n) products, numba)
-    symmetric = K.symmetric()
+    else:
+        K = None                           # made below only if the edge path does not finish
+    if K is None:
+        symmetric = bool(_band_asymmetry(abz_raw, EDGE_BAND, ez.fixed) <= 1e-10)   # K_e = T^T K T: the same test
+    else:
+        symmetric = K.symmetric()
     Vfull = symmetry_modes(system, state)
     V = np.array([v[idx] for v in Vfull]).T if Vfull else np.zeros((n, 0))
     V = _m_orthonormal(V, m) if V.shape[1] else V
@@ -302,6 +307,8 @@ def lowest_modes(system, state, n_eigenvalues=6, dense_max=DENSE_MAX_DOFS, edge=
         out["method"] = "nothing to compute"
         return out
     edge = None
+    if K is None and (n <= dense_max or n_finite - k < 3 or not symmetric or V.shape[1]):
+        K = _BandOperator(system, idx)
     if n <= dense_max or n_finite - k < 3:
         ev, vec = _dense_lowest(K, m, V, symmetric, k)
         out["method"] = "dense"
@@ -313,6 +320,8 @@ def lowest_modes(system, state, n_eigenvalues=6, dense_max=DENSE_MAX_DOFS, edge=
     if edge is not None:
         return _edge_out(system, ez, abz_raw, edge, idx, mass, k, out)
     if out["method"] != "dense":
+        if K is None:
+            K = _BandOperator(system, idx)   # the edge path refused its factorisation: node coordinates
         scale = float(K.abs_dot(np.ones(n))[massive].max() / m[massive].min()) if massive.any() else 1.0
         out["scale"] = scale
         ev, vec, n_below, sigma = _banded_lowest(system, K, idx, mass, m, V, k, symmetric, scale)
@@ -607,21 +616,58 @@ def _edge_lowest(ez, abz, k, tol=1e-10):
 
 
 @njit(cache=True)
-def _band_products(ab, kb, Z):
-    """(A Z, |A| |Z|) for a symmetric-storage general band A (half-bandwidth kb, identity order) and Z (n, k), in
-    one pass over the band."""
-    n, k = Z.shape
+def _band_asymmetry(ab, kb, fixed):
+    """max |A_ij - A_ji| / max |A_ij| over the free rows and columns of a general band (half-bandwidth kb,
+    identity order)."""
+    n = ab.shape[1]
     off = 2 * kb
-    AZ = np.zeros((n, k))
-    BZ = np.zeros((n, k))
+    big = 0.0
+    asym = 0.0
     for j in range(n):
+        if fixed[j]:
+            continue
+        for i in range(j + 1, min(n - 1, j + kb) + 1):
+            if fixed[i]:
+                continue
+            low = ab[off + i - j, j]
+            up = ab[off + j - i, i]
+            big = max(big, abs(low), abs(up))
+            asym = max(asym, abs(low - up))
+        big = max(big, abs(ab[off, j]))
+    return asym / big if big > 0.0 else 0.0
+
+
+@njit(cache=True)
+def _edge_residual(abz, kb, z, lam, mass, n_nodes):
+    """For one eigenpair (lam, z) in edge coordinates (full z, links applied): the node-coordinate vector x = T z,
+    the node-coordinate residual K x - lam M x evaluated as T^-T (K_e z) - lam M x (differences: no cancellation
+    of the node-coordinate stiffness), and |K_e| |z| (round-off levels)."""
+    n = z.shape[0]
+    off = 2 * kb
+    kz = np.zeros(n)
+    az = np.zeros(n)
+    for j in range(n):                          # K_e z and |K_e| |z|, one pass over the band
+        zj = z[j]
+        if zj == 0.0:
+            continue
         for i in range(max(0, j - kb), min(n - 1, j + kb) + 1):
-            a = ab[off + i - j, j]
-            if a != 0.0:
-                for c in range(k):
-                    AZ[i, c] += a * Z[j, c]
-                    BZ[i, c] += abs(a * Z[j, c])
-    return AZ, BZ
+            a = abz[off + i - j, j] * zj
+            kz[i] += a
+            az[i] += abs(a)
+    x = z.copy()
+    for a in range(3):
+        acc = 0.0
+        for c in range(n_nodes):
+            acc += z[4 * c + a]
+            x[4 * c + a] = acc
+        for c in range(n_nodes - 1):            # T^-T: differences
+            kz[4 * c + a] -= kz[4 * (c + 1) + a]
+    r = np.empty(n)
+    mx = np.empty(n)
+    for i in range(n):
+        mx[i] = mass[i] * x[i]
+        r[i] = kz[i] - lam * mx[i]
+    return x, r, mx, az
 
 
 def _edge_out(system, ez, abz_raw, edge, idx, mass, k, out):
@@ -636,12 +682,14 @@ def _edge_out(system, ez, abz_raw, edge, idx, mass, k, out):
     order = np.argsort(ev)[:k]
     ev, y = ev[order], y[:, order]
     z = ez.expand(y)
-    q = ez.to_q(z)                                    # the eigenvectors in node coordinates
-    kz, az = _band_products(abz_raw, EDGE_BAND, np.ascontiguousarray(z))
-    mq = mass[:, None] * q
-    r = ez.transpose_to_q(kz) - mq * ev[None, :]     # K x - lambda M x, node coordinates
-    for j in range(r.shape[1]):                      # its part on the free variables of the supports
-        r[:, j] = condense_forces(system, np.ascontiguousarray(r[:, j]))
+    q = np.empty_like(z)
+    r = np.empty_like(z)
+    mq = np.empty_like(z)
+    az = np.empty_like(z)
+    for j in range(z.shape[1]):
+        q[:, j], r[:, j], mq[:, j], az[:, j] = _edge_residual(abz_raw, EDGE_BAND, np.ascontiguousarray(z[:, j]),
+                                                              ev[j], mass, ez.N)
+        r[:, j] = condense_forces(system, np.ascontiguousarray(r[:, j]))     # the part on the free variables
         mq[:, j] = condense_forces(system, np.ascontiguousarray(mq[:, j]))
     den = np.maximum(np.abs(ev) * np.linalg.norm(mq[idx], axis=0), 1e-300)
     eps = np.finfo(float).eps

@@ -944,6 +944,14 @@ def _banded_lowest(system, K, idx, mass, m, V, k, symmetric, scale):
         BiU = solve_b(U)
         cap = np.linalg.inv(C) + W.T @ BiU
         cap_lu = np.linalg.inv(cap)
+        if symmetric and n_below >= 0:
+            # the inertia counted B = K - sigma M; the eigen-solver's matrix is B + U C U^T (the symmetry modes
+            # projected out, moved to beta). Haynsworth on [[B, U], [U^T, -C^-1]] both ways:
+            # negatives(B + U C U^T) = negatives(B) + positives(cap) - positives(C), cap = C^-1 + U^T B^-1 U, and
+            # positives(C) = mm (C = [[A, -I], [-I, 0]] has the inertia of A and -A^-1 together, A = S + beta I
+            # regular). A symmetry mode slightly below sigma -- a writhed ring's material sliding, O(h^2) -- was
+            # counted as a negative eigenvalue the projected pencil does not have
+            n_below += int(np.sum(np.linalg.eigvalsh(0.5 * (cap + cap.T)) > 0)) - mm
 
         def op(b):
             y = solve_b(b)

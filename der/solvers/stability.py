@@ -590,7 +590,7 @@ def _edge_eligible(system):
     """Whether the edge-coordinate path applies: one open rod without contact, held at its start (a clamp, hinge
     or roller at the start, or a pin on node 0), nothing else holding a node (fix_theta anywhere)."""
     rod = system.rod
-    if rod.closed or system.parts is not None or system.terms or getattr(system, "contact_coo", None):
+    if rod.closed or system.parts is not None or getattr(system, "terms", ()) or getattr(system, "contact_coo", None):
         return False
     if system.kl != 10 or system.ku != 10:
         return False
@@ -1033,10 +1033,12 @@ def _free_full(system):
 
 def stability(system, result, n_eigenvalues=6):
     """Fill ``result.min_eigenvalue``, ``result.eigenvalues``, ``result.stable``, ``result.flutter``,
-    ``result.stability_note`` and ``result.stability_time`` (seconds; not part of ``wall_time``)."""
+    ``result.stability_note``, ``result.stability_method`` (``lowest_modes``' method) and ``result.stability_time``
+    (seconds; not part of ``wall_time``)."""
     t0 = time.perf_counter()
     state = result.state
     out = lowest_modes(system, state, n_eigenvalues)
+    result.stability_method = out["method"]
     ev = out["eigenvalues"]
     symmetric = out["symmetric"]
     notes = []

@@ -198,6 +198,8 @@ class SolveResult:
         modes removed. ``stable`` is False if one has a negative real part (divergence); ``flutter`` is True if
         complex eigenvalues appear among the lowest (circulatory loads: the undamped rod would flutter).
     stability_time : seconds spent in the stability analysis (not part of ``wall_time``; 0 if not run).
+    stability_method : the eigen-solver path that ran ("dense", "banded shift-invert" in node coordinates, "edge
+        shift-invert" in edge coordinates: open rods held at their start; "" if not run). See der.solvers.stability.
     energy : energy by term at the final state.
     history : residual after each iteration/check.
     compile_time : seconds spent compiling (or loading from numba's cache) der's kernels before this solve,
@@ -256,6 +258,7 @@ class SolveResult:
     residual_floor: float = float("nan")
     residual_per_length: float = float("nan")
     stability_time: float = 0.0
+    stability_method: str = ""
     compile_time: float = 0.0
     reactions: list = field(default_factory=list)
     tol: float = float("nan")

@@ -58,25 +58,42 @@ projection of the symmetry modes applied by a Woodbury update of rank 2m (m symm
 symmetry modes themselves moved to a large eigenvalue beta so they are never found. Every returned eigenpair
 is checked by its residual ||K v - lambda M v|| / (|lambda| ||M v||) evaluated from the assembled K.
 
-Accuracy limit: the entries of K are of order A1/h^3 while K v is of order lambda h for a smooth bending mode,
-so rounding the assembled stiffness alone moves a bending eigenvalue by up to eps |v|^T |K| |v| / v^T M v
-(reported per eigenpair as its floor), which grows like eps n^4. On the cantilever (tools/stability_scaling.py)
-the lowest eigenvalue is second-order accurate up to n ~ 500 (error 7e-6 at n = 400), then round-off takes over:
-2e-5 at n = 1,000, 1e-2 at 10,000, and at 100,000 the value is meaningless (its floor exceeds it by 1e4; the
-note says so and the sign counts as unresolved). No eigen-solver can do better on this matrix in double
-precision; it would take a stiffness assembled in relative coordinates (edge vectors, curvatures).
+Accuracy limit in node coordinates: the entries of K are of order A1/h^3 while K v is of order lambda h for a
+smooth bending mode, so rounding the assembled stiffness alone moves a bending eigenvalue by up to
+eps |v|^T |K| |v| / v^T M v (reported per eigenpair as its floor), which grows like eps n^4. On the cantilever
+(tools/stability_scaling.py) the lowest eigenvalue was second-order accurate up to n ~ 500, then round-off took
+over: 2e-5 at n = 1,000, 1e-2 at 10,000, and at 100,000 the value was meaningless.
+
+Edge coordinates
+----------------
+An open rod held at its start (a clamp, hinge or roller at the start, or a pin on node 0; fix_theta anywhere;
+nothing else holding a node; no contact) with a symmetric stiffness and no symmetry mode is analysed in edge
+coordinates instead (``_EdgeCoordinates``, method "edge shift-invert"): x_0, the edge vectors e_j = x_{j+1} - x_j and
+the angles. Its stiffness K_e = T^T K T (T: cumulative sums) is read off the assembled band by translation
+invariance in a few terms per entry, without the cancellation of the node-coordinate entries, and checked
+(K x = T^-T K_e T^-1 x on a random vector to round-off, else node coordinates); it is banded (half-bandwidth 7
+against 10). The mass T^T M T is dense but only applied, by cumulative sums, and factored as R^T R, R = M^1/2 T:
+Lanczos (ARPACK) runs on R K_e^-1 R^T, shift-invert at sigma = 0 on one banded LDL^T of K_e, whose pivots count
+the negative eigenvalues exactly (Sylvester) -- the stability verdict. The eigenvalues' round-off floors grow like
+eps n^2 (cantilever, lowest eigenvalue: error 8e-9 at n = 10^4, 4e-7 at 10^5, against its floor 3e-6). Residuals
+are evaluated in node coordinates, K x as T^-T K_e z (differences), with their round-off level (eps n^3 for a
+bending mode; the eigenvalue's error is quadratic in the residual). Rings, free rods, rods held elsewhere and
+scenes with symmetry modes keep the node-coordinate paths above.
 """
 import time
 
 import numpy as np
+from numba import njit
 
+from ..constraints import END_SUPPORTS, FixTheta, Pin
 from ..linalg import (BandLU, add_diagonal, band_ldlt, band_ldlt_solve, band_matvec, band_negative_pivots,
-                      band_to_sparse,
+                      band_to_sparse, condense_band, dot, dot_abs,
                       constrain_band)
 from ..loads import DistributedForce, EndForce, EndTorque, PointForce, TwistingMoment
-from .system import condense_system_band, evaluate_system, rotational_inertia
+from .system import condense_forces, condense_system_band, evaluate_system, rotational_inertia
 
 DENSE_MAX_DOFS = 300   # dense eigen-solver only for small systems
+EDGE_METHOD = "edge shift-invert"
 RESIDUAL_TOL = 1e-6    # eigenpairs with a larger relative residual are reported as inaccurate
 
 
@@ -251,14 +268,24 @@ def _m_orthonormal(V, m):
 # ---------------------------------------------------------------------------------------------
 
 
-def lowest_modes(system, state, n_eigenvalues=6, dense_max=DENSE_MAX_DOFS):
+def lowest_modes(system, state, n_eigenvalues=6, dense_max=DENSE_MAX_DOFS, edge=True):
     """The lowest eigenpairs of the constrained pencil (K, M) at ``state`` with the symmetry modes projected
     out. Returns a dict: ``eigenvalues`` (sorted by real part), ``vectors`` (n_dof, k; zero on fixed DOFs),
     ``residuals`` (relative, ||K v - lambda M v|| / (|lambda| ||M v||)), ``n_symmetry``, ``symmetric``,
-    ``floors`` (round-off floor of each eigenvalue, absolute), ``n_free``, ``method``, ``scale`` (Gershgorin bound
-    of M^-1 K)."""
+    ``floors`` (round-off floor of each eigenvalue, absolute), ``n_free``, ``method`` ("dense", "banded shift-invert"
+    in node coordinates, or "edge shift-invert" in edge coordinates, see ``_EdgeCoordinates``), ``scale``
+    (Gershgorin bound of M^-1 K, banded path), ``residual_floors`` (edge path: the round-off level of the
+    residuals) and ``inertia`` (shift-invert paths: the number of eigenvalues below the shift, and the shift).
+    ``edge=False`` keeps large systems in node coordinates (for comparisons)."""
     rod = system.rod
     evaluate_system(system, state, 2)
+    ez = None
+    if edge and _edge_eligible(system) and 4 * rod.n_nodes > dense_max:
+        # edge coordinates (see _EdgeCoordinates), read off the assembled band before the end supports condense it
+        ez = _EdgeCoordinates(system, state)
+        abz_raw = ez.band(system.ab, system.kl, system.ku)
+        if not ez.check_band(system.ab, system.kl, system.ku, abz_raw) <= EDGE_CHECK_TOL:
+            ez = None
     condense_system_band(system, system.ab)   # end supports: T^T K T on their free variables (q = c + T y)
     free = system.free.copy()
     if not rod.closed:
@@ -276,24 +303,42 @@ def lowest_modes(system, state, n_eigenvalues=6, dense_max=DENSE_MAX_DOFS):
     if getattr(system, "contact_coo", None) or system.kl != system.ku:
         # contact (issue 14): the off-band barrier Hessian joins the band; a sparse matrix on the free DOFs
         K = _sparse_free(system, idx)
-    else:
+    elif ez is None:
         K = _BandOperator(system, idx)     # the band itself: no sparse copy (O(n) products, numba)
-    k_abs_rows = K.abs_dot(np.ones(n))
-    scale = float(k_abs_rows[massive].max() / m[massive].min()) if massive.any() else 1.0
-    symmetric = K.symmetric()
+    else:
+        K = None                           # made below only if the edge path does not finish
+    if K is None:
+        symmetric = bool(_band_asymmetry(abz_raw, EDGE_BAND, ez.fixed) <= 1e-10)   # K_e = T^T K T: the same test
+    else:
+        symmetric = K.symmetric()
     Vfull = symmetry_modes(system, state)
     V = np.array([v[idx] for v in Vfull]).T if Vfull else np.zeros((n, 0))
     V = _m_orthonormal(V, m) if V.shape[1] else V
-    out.update(n_symmetry=V.shape[1], symmetric=symmetric, scale=scale)
+    out.update(n_symmetry=V.shape[1], symmetric=symmetric)
     n_finite = int(massive.sum()) - V.shape[1]
     k = max(0, min(n_eigenvalues, n_finite))
     if k == 0:
         out["method"] = "nothing to compute"
         return out
+    edge = None
+    if K is None and (n <= dense_max or n_finite - k < 3 or not symmetric or V.shape[1]):
+        K = _BandOperator(system, idx)
     if n <= dense_max or n_finite - k < 3:
         ev, vec = _dense_lowest(K, m, V, symmetric, k)
         out["method"] = "dense"
-    else:
+    elif ez is not None and symmetric and V.shape[1] == 0:
+        abz = abz_raw
+        if ez.tri_dep.size:
+            abz = abz_raw.copy(order="F")
+            condense_band(abz, EDGE_BAND, EDGE_BAND, ez.perm, ez.tri_dep, ez.tri_master, ez.tri_coef)
+        edge = _edge_lowest(ez, abz, k)
+    if edge is not None:
+        return _edge_out(system, ez, abz_raw, edge, idx, mass, k, out)
+    if out["method"] != "dense":
+        if K is None:
+            K = _BandOperator(system, idx)   # the edge path refused its factorisation: node coordinates
+        scale = float(K.abs_dot(np.ones(n))[massive].max() / m[massive].min()) if massive.any() else 1.0
+        out["scale"] = scale
         ev, vec, n_below, sigma = _banded_lowest(system, K, idx, mass, m, V, k, symmetric, scale)
         out["method"] = "banded shift-invert"
         out["inertia"] = (n_below, sigma)
@@ -315,6 +360,371 @@ def lowest_modes(system, state, n_eigenvalues=6, dense_max=DENSE_MAX_DOFS):
     full = np.zeros((rod.n_dof, vec.shape[1]), dtype=vec.dtype)
     full[idx] = vec
     out.update(eigenvalues=ev, vectors=full, residuals=r / den, floors=floor)
+    return out
+
+
+
+# ---------------------------------------------------------------------------------------------
+# edge coordinates (open rods held at their start)
+# ---------------------------------------------------------------------------------------------
+
+EDGE_BAND = 7          # half-bandwidth of the stiffness in edge coordinates (interleaved slots)
+EDGE_CHECK_TOL = 1e-11  # K_x = T^-T K_e T^-1 on a random vector, relative to |K_x| |v|
+
+
+class _EdgeCoordinates:
+    """The eigenproblem of an open rod held at its start in edge coordinates z: slot 0 holds x_0, node slot c >= 1
+    holds the edge vector e_{c-1} = x_c - x_{c-1}, the theta slots are unchanged, q = T z (T: cumulative sums of
+    the node slots). The stiffness K_e = T^T K T is read off the assembled K in a few terms per entry by its
+    translation invariance (every row and column of K sums to zero over the nodes, per component), with no
+    cancellation of the large node-coordinate entries: for node slots c <= d,
+    K_e[c, d] = -sum_{a < c, b >= d} K[a, b] (non-zero only for d <= c + 1: the bending stencils couple two edges),
+    K_e[c, theta_j] = sum_{a >= c} K[a, theta_j] (zero for c <= j - 1 and c >= j + 3), and the x_0 rows are zero.
+    The supports at the start become links between slots 0 and 1 (their equations on x_0, x_1 = x_0 + e_0). The
+    mass M_e = T^T M T is dense but only applied (cumulative sums, O(n)), and factored as R^T R with
+    R = M^1/2 T T_L (M the lumped mass in node coordinates, T_L the supports' links)."""
+
+    def __init__(self, system, state):
+        from ..constraints import _eliminate, _support_equations
+
+        rod = system.rod
+        self.N = N = rod.n_nodes
+        self.n_dof = n_dof = rod.n_dof
+        fixed = np.zeros(n_dof, dtype=bool)
+        fixed[3::4] = system.fixed[3::4]            # edge angles (fix_theta, clamps) and the dummy slot
+        x = state.positions
+        tri = []
+        for c in system.scene.constraints:
+            if isinstance(c, Pin):
+                fixed[0:3] = True
+            elif isinstance(c, END_SUPPORTS):
+                G, _ = _support_equations(c, x[0], x[1], rigid_edge=rod.inextensible)
+                # x_0 = z_0, x_1 = z_0 + z_1
+                Gz = G @ np.block([[np.eye(3), np.zeros((3, 3))], [np.eye(3), np.eye(3)]])
+                local = np.array([0, 1, 2, 4, 5, 6])
+                for col, _, coefs in _eliminate(Gz, np.zeros(G.shape[0]), ([0, 1, 2], [3, 4, 5])):
+                    fixed[local[col]] = True
+                    tri.extend((int(local[col]), int(local[c2]), a) for c2, a in coefs.items())
+        tri = np.array(tri, dtype=float).reshape(-1, 3)
+        self.tri_dep = tri[:, 0].astype(np.int64)
+        self.tri_master = tri[:, 1].astype(np.int64)
+        self.tri_coef = tri[:, 2].copy()
+        self.fixed = fixed
+        self.idx = np.flatnonzero(~fixed)
+        self.perm = np.arange(n_dof, dtype=np.int64)
+        mass = eigen_mass(rod)
+        self.massive = np.flatnonzero(mass > 0)
+        self.mass = mass
+        self.root = np.sqrt(mass[self.massive])
+
+    # q = T z and its transpose, on (n_dof,) or (n_dof, k) arrays
+    def to_q(self, z):
+        q = z.copy()
+        v = q.reshape((self.N, 4) + z.shape[1:])
+        v[:, :3] = np.cumsum(v[:, :3], axis=0)
+        return q
+
+    def to_z(self, q):
+        """z = T^-1 q (differences)."""
+        z = q.copy()
+        v = z.reshape((self.N, 4) + q.shape[1:])
+        qv = q.reshape(v.shape)
+        v[1:, :3] = qv[1:, :3] - qv[:-1, :3]
+        return z
+
+    def transpose_to_z(self, f):
+        """T^T f: the generalized force on z of the node forces f (suffix sums)."""
+        g = f.copy()
+        v = g.reshape((self.N, 4) + f.shape[1:])
+        v[:, :3] = np.cumsum(v[::-1, :3], axis=0)[::-1]
+        return g
+
+    def transpose_to_q(self, g):
+        """T^-T g (the node forces whose generalized force on z is g)."""
+        f = g.copy()
+        v = f.reshape((self.N, 4) + g.shape[1:])
+        gv = g.reshape(v.shape)
+        v[:-1, :3] = gv[:-1, :3] - gv[1:, :3]
+        return f
+
+    def expand(self, y):
+        """The full z (links applied) of the free variables y."""
+        z = np.zeros((self.n_dof,) + y.shape[1:])
+        z[self.idx] = y
+        if self.tri_dep.size:
+            c = self.tri_coef if y.ndim == 1 else self.tri_coef[:, None]
+            np.add.at(z, self.tri_dep, c * z[self.tri_master])
+        return z
+
+    def condense_full(self, g):
+        """T_L^T g on the free z, zero on the held and dependent ones (g a generalized force on the full z)."""
+        g = g.copy()
+        if self.tri_dep.size:
+            c = self.tri_coef if g.ndim == 1 else self.tri_coef[:, None]
+            np.add.at(g, self.tri_master, c * g[self.tri_dep])
+        g[self.fixed] = 0.0
+        return g
+
+    def mass_dot(self, y):
+        q = self.to_q(self.expand(y))
+        m = self.mass if y.ndim == 1 else self.mass[:, None]
+        return self.condense_full(self.transpose_to_z(m * q))[self.idx]
+
+    def band(self, ab, kl, ku):
+        """K_e (see the class docstring) in general-band storage with half-bandwidth EDGE_BAND, from the assembled
+        node-coordinate band ``ab`` (identity order, half-bandwidths kl = ku = 10)."""
+        abz = np.zeros((3 * EDGE_BAND + 1, self.n_dof), order="F")
+        _edge_band_fill(ab, kl, ku, self.N, abz, EDGE_BAND)
+        return abz
+
+    def check_band(self, ab, kl, ku, abz):
+        """Relative error of K_x v = T^-T K_e T^-1 v on a random v, against max |K_x v| (round-off if K is
+        translation invariant and has the rod's stencil pattern; O(1) if not, e.g. a term tying the rod to the
+        ground)."""
+        v = np.random.default_rng(1).uniform(-1.0, 1.0, self.n_dof)
+        kx = np.empty(self.n_dof)
+        band_matvec(ab, kl, ku, self.perm, v, kx, False)
+        ke = np.empty(self.n_dof)
+        band_matvec(abz, EDGE_BAND, EDGE_BAND, self.perm, self.to_z(v), ke, False)
+        return float(np.abs(self.transpose_to_q(ke) - kx).max() / max(np.abs(kx).max(), 1e-300))
+
+
+
+@njit(cache=True)
+def _edge_band_fill(ab, kl, ku, n_nodes, abz, kb):
+    """abz <- K_e (general-band storage, half-bandwidth kb) from the node-coordinate band ab (identity order): the
+    sums of ``_EdgeCoordinates.band``, entry by entry."""
+    off = kl + ku
+    offz = 2 * kb
+    N = n_nodes
+    for c in range(1, N):
+        for a in range(3):
+            for b in range(3):
+                i = 4 * c + a
+                j = 4 * c + b
+                v = -ab[off + 4 * (c - 1) + a - j, j]
+                if c >= 2:
+                    v -= ab[off + 4 * (c - 2) + a - j, j]
+                if c <= N - 2:
+                    jj = 4 * (c + 1) + b
+                    v -= ab[off + 4 * (c - 1) + a - jj, jj]
+                    abz[offz + i - jj, jj] = -ab[off + 4 * (c - 1) + a - jj, jj]      # slots c, c + 1
+                    ii = 4 * (c + 1) + a
+                    jc = 4 * (c - 1) + b
+                    abz[offz + ii - j, j] = -ab[off + ii - jc, jc]                    # slots c + 1, c
+                abz[offz + i - j, j] = v
+    for e in range(N - 1):
+        t = 4 * e + 3
+        for a in range(3):
+            acc_r = 0.0
+            acc_c = 0.0
+            for s in range(2, -1, -1):          # node slots c = e + s: suffix sums over the nodes a >= c
+                c = e + s
+                if c <= N - 1 and c >= 1:
+                    i = 4 * c + a
+                    acc_r += ab[off + i - t, t]
+                    acc_c += ab[off + t - i, i]
+                    abz[offz + i - t, t] = acc_r
+                    abz[offz + t - i, i] = acc_c
+        for s in range(-1, 2):
+            k = e + s
+            if k >= 0 and k <= N - 2:
+                u = 4 * k + 3
+                abz[offz + t - u, u] = ab[off + t - u, u]
+
+
+@njit(cache=True)
+def _edge_rt_solve(w, L, D, massive, root, fixed, tri_dep, tri_master, tri_coef, n_nodes):
+    """z = T_L K^-1 T_L^T T^T M^1/2 w (full z, links applied): the solve of the edge-coordinate operator."""
+    n = fixed.shape[0]
+    f = np.zeros(n)
+    for i in range(massive.shape[0]):
+        f[massive[i]] = root[i] * w[i]
+    for a in range(3):                         # T^T: suffix sums over the node slots
+        acc = 0.0
+        for c in range(n_nodes - 1, -1, -1):
+            acc += f[4 * c + a]
+            f[4 * c + a] = acc
+    for k in range(tri_dep.shape[0]):
+        f[tri_master[k]] += tri_coef[k] * f[tri_dep[k]]
+    for i in range(n):
+        if fixed[i]:
+            f[i] = 0.0
+    z = f
+    b = L.shape[1] - 1                         # L D L^T z = f in place (band_ldlt's factors, identity order)
+    for k in range(n):
+        acc = z[k]
+        for s in range(1, min(b, k) + 1):
+            acc -= L[k, s] * z[k - s]
+        z[k] = acc
+    for k in range(n):
+        z[k] /= D[k]
+    for k in range(n - 1, -1, -1):
+        acc = z[k]
+        for s in range(1, min(b, n - 1 - k) + 1):
+            acc -= L[k + s, s] * z[k + s]
+        z[k] = acc
+    for k in range(tri_dep.shape[0]):
+        z[tri_dep[k]] = 0.0
+    for k in range(tri_dep.shape[0]):
+        z[tri_dep[k]] += tri_coef[k] * z[tri_master[k]]
+    return z
+
+
+@njit(cache=True)
+def _edge_apply(w, L, D, massive, root, fixed, tri_dep, tri_master, tri_coef, n_nodes):
+    """R K^-1 R^T w, R = M^1/2 T T_L (the Lanczos operator of ``_edge_lowest``)."""
+    z = _edge_rt_solve(w, L, D, massive, root, fixed, tri_dep, tri_master, tri_coef, n_nodes)
+    for a in range(3):                         # T: prefix sums
+        acc = 0.0
+        for c in range(n_nodes):
+            acc += z[4 * c + a]
+            z[4 * c + a] = acc
+    out = np.empty(massive.shape[0])
+    for i in range(massive.shape[0]):
+        out[i] = root[i] * z[massive[i]]
+    return out
+
+
+def _edge_eligible(system):
+    """Whether the edge-coordinate path applies: one open rod without contact, held at its start (a clamp, hinge
+    or roller at the start, or a pin on node 0), nothing else holding a node (fix_theta anywhere)."""
+    rod = system.rod
+    if rod.closed or system.parts is not None or getattr(system, "terms", ()) or getattr(system, "contact_coo", None):
+        return False
+    if system.kl != 10 or system.ku != 10:
+        return False
+    held = False
+    for c in system.scene.constraints:
+        if isinstance(c, FixTheta):
+            continue
+        if isinstance(c, Pin) and c.node % rod.n_nodes == 0:
+            held = True
+        elif isinstance(c, END_SUPPORTS) and c.end in ("start", 0):
+            held = True
+        else:
+            return False
+    return held
+
+
+def _edge_lowest(ez, abz, k, tol=1e-10):
+    """Lanczos (ARPACK) on R K^-1 R^T (M_e = R^T R, K the condensed K_e on the free z), i.e. shift-invert at
+    sigma = 0 in standard symmetric form on one banded LDL^T of K, whose pivots count its negative eigenvalues
+    (Sylvester). Returns (eigenvalues, list of eigenvectors as full z with the links applied, negatives), or None
+    if the factorisation is refused
+    (a zero pivot, or a test solve whose backward error is not at round-off level)."""
+    import scipy.sparse.linalg as spla
+
+    L, D, neg = band_ldlt(abz, EDGE_BAND, EDGE_BAND, ez.perm, 0.0, ez.mass, ez.fixed, 0.0)
+    if neg < 0:
+        return None
+    # backward error of a test solve at round-off level, else refused (no pivoting on an indefinite matrix)
+    b = np.random.default_rng(0).standard_normal(ez.n_dof)
+    b[ez.fixed] = 0.0
+    xs = band_ldlt_solve(L, D, ez.perm, b)
+    kx = np.empty(ez.n_dof)
+    ka = np.empty(ez.n_dof)
+    band_matvec(abz, EDGE_BAND, EDGE_BAND, ez.perm, xs, kx, False)
+    band_matvec(abz, EDGE_BAND, EDGE_BAND, ez.perm, xs, ka, True)
+    free = ~ez.fixed
+    if not (np.abs(kx - b)[free].max() <= 1e-10 * (ka + np.abs(b))[free].max()):
+        return None
+    args = (L, D, ez.massive, ez.root, ez.fixed, ez.tri_dep, ez.tri_master, ez.tri_coef, ez.N)
+    n_m = ez.massive.size
+    kk = min(k, n_m - 2)
+    ncv = min(n_m - 1, max(2 * kk + 1, 12))
+    Cop = spla.LinearOperator((n_m, n_m), matvec=lambda w: _edge_apply(np.ascontiguousarray(w).ravel(), *args),
+                              dtype=float)
+    v0 = np.random.default_rng(0).standard_normal(n_m)       # (reproducible: a seeded start)
+    mu, w = spla.eigsh(Cop, k=kk, which="LM", ncv=ncv, tol=tol, v0=v0)
+    keep = mu != 0.0
+    mu, w = mu[keep], w[:, keep]
+    z = [_edge_rt_solve(np.ascontiguousarray(w[:, j]), *args) / mu[j] for j in range(w.shape[1])]
+    return 1.0 / mu, z, int(neg)
+
+
+@njit(cache=True)
+def _band_asymmetry(ab, kb, fixed):
+    """max |A_ij - A_ji| / max |A_ij| over the free rows and columns of a general band (half-bandwidth kb,
+    identity order)."""
+    n = ab.shape[1]
+    off = 2 * kb
+    big = 0.0
+    asym = 0.0
+    for j in range(n):
+        if fixed[j]:
+            continue
+        for i in range(j + 1, min(n - 1, j + kb) + 1):
+            if fixed[i]:
+                continue
+            low = ab[off + i - j, j]
+            up = ab[off + j - i, i]
+            big = max(big, abs(low), abs(up))
+            asym = max(asym, abs(low - up))
+        big = max(big, abs(ab[off, j]))
+    return asym / big if big > 0.0 else 0.0
+
+
+@njit(cache=True)
+def _edge_residual(abz, kb, z, lam, mass, n_nodes):
+    """For one eigenpair (lam, z) in edge coordinates (full z, links applied): the node-coordinate vector x = T z,
+    the node-coordinate residual K x - lam M x evaluated as T^-T (K_e z) - lam M x (differences: no cancellation
+    of the node-coordinate stiffness), and |K_e| |z| (round-off levels)."""
+    n = z.shape[0]
+    off = 2 * kb
+    kz = np.zeros(n)
+    az = np.zeros(n)
+    for j in range(n):                          # K_e z and |K_e| |z|, one pass over the band
+        zj = z[j]
+        if zj == 0.0:
+            continue
+        for i in range(max(0, j - kb), min(n - 1, j + kb) + 1):
+            a = abz[off + i - j, j] * zj
+            kz[i] += a
+            az[i] += abs(a)
+    x = z.copy()
+    for a in range(3):
+        acc = 0.0
+        for c in range(n_nodes):
+            acc += z[4 * c + a]
+            x[4 * c + a] = acc
+        for c in range(n_nodes - 1):            # T^-T: differences
+            kz[4 * c + a] -= kz[4 * (c + 1) + a]
+    r = np.empty(n)
+    mx = np.empty(n)
+    for i in range(n):
+        mx[i] = mass[i] * x[i]
+        r[i] = kz[i] - lam * mx[i]
+    return x, r, mx, az
+
+
+def _edge_out(system, ez, abz_raw, edge, idx, mass, k, out):
+    """``lowest_modes``' result from the edge-coordinate eigenpairs: the vectors in node coordinates (x = T z);
+    the residuals ||K x - lambda M x|| / (|lambda| ||M x||) on the free variables of the node coordinates, K x
+    evaluated as T^-T K_e z (differences: no cancellation of the node-coordinate stiffness), with their round-off
+    level (``residual_floors``: 2 eps || |K_e| |z| || / (|lambda| ||M x||), which grows like eps n^3 for a bending
+    mode -- the first-order bound it gives on the eigenvalue is pessimistic, its error being quadratic in the
+    residual); the eigenvalues' round-off floors eps |z|^T |K_e| |z| / x^T M x (eps n^2 for a bending mode, against
+    eps n^4 in node coordinates)."""
+    ev, zs, neg = edge
+    order = np.argsort(ev)[:k]
+    ev = ev[order]
+    eps = np.finfo(float).eps
+    full = np.zeros((system.rod.n_dof, order.size))
+    res, res_floor, floors = np.empty(order.size), np.empty(order.size), np.empty(order.size)
+    for c, j in enumerate(order):
+        z = zs[j]
+        x, r, mx, az = _edge_residual(abz_raw, EDGE_BAND, z, ev[c], mass, ez.N)
+        cm = condense_forces(system, mx.copy())
+        r = condense_forces(system, r)                   # zero on held DOFs: the part on the free variables
+        den = max(abs(ev[c]) * np.sqrt(dot(cm, cm)), 1e-300)
+        res[c] = np.sqrt(dot(r, r)) / den
+        res_floor[c] = 2.0 * eps * np.sqrt(dot(az, az)) / den
+        floors[c] = eps * dot_abs(az, z) / max(dot(x, mx), 1e-300)
+        x[system.fixed] = 0.0
+        full[:, c] = x
+    out.update(eigenvalues=ev, vectors=full, residuals=res, residual_floors=res_floor, floors=floors,
+               method=EDGE_METHOD, inertia=(neg, 0.0))
     return out
 
 
@@ -564,6 +974,14 @@ def _banded_lowest(system, K, idx, mass, m, V, k, symmetric, scale):
         BiU = solve_b(U)
         cap = np.linalg.inv(C) + W.T @ BiU
         cap_lu = np.linalg.inv(cap)
+        if symmetric and n_below >= 0:
+            # the inertia counted B = K - sigma M; the eigen-solver's matrix is B + U C U^T (the symmetry modes
+            # projected out, moved to beta). Haynsworth on [[B, U], [U^T, -C^-1]] both ways:
+            # negatives(B + U C U^T) = negatives(B) + positives(cap) - positives(C), cap = C^-1 + U^T B^-1 U, and
+            # positives(C) = mm (C = [[A, -I], [-I, 0]] has the inertia of A and -A^-1 together, A = S + beta I
+            # regular). A symmetry mode slightly below sigma -- a writhed ring's material sliding, O(h^2) -- was
+            # counted as a negative eigenvalue the projected pencil does not have
+            n_below += int(np.sum(np.linalg.eigvalsh(0.5 * (cap + cap.T)) > 0)) - mm
 
         def op(b):
             y = solve_b(b)
@@ -617,10 +1035,12 @@ def _free_full(system):
 
 def stability(system, result, n_eigenvalues=6):
     """Fill ``result.min_eigenvalue``, ``result.eigenvalues``, ``result.stable``, ``result.flutter``,
-    ``result.stability_note`` and ``result.stability_time`` (seconds; not part of ``wall_time``)."""
+    ``result.stability_note``, ``result.stability_method`` (``lowest_modes``' method) and ``result.stability_time``
+    (seconds; not part of ``wall_time``)."""
     t0 = time.perf_counter()
     state = result.state
     out = lowest_modes(system, state, n_eigenvalues)
+    result.stability_method = out["method"]
     ev = out["eigenvalues"]
     symmetric = out["symmetric"]
     notes = []
@@ -643,10 +1063,19 @@ def stability(system, result, n_eigenvalues=6):
         return result
     floor = float(out["floors"][0])
     lam_min = float(ev.real[0])
-    if symmetric and out["method"] != "dense":
+    n_below, sigma = out.get("inertia", (-1, 0.0))
+    if symmetric and out["method"] == EDGE_METHOD:
+        # the inertia of K itself (sigma = 0) counts the negative eigenvalues exactly; those within their round-off
+        # floor of zero may be counted either way. More of them than found: they lie beyond every found one
+        # (shift-invert finds the eigenvalues nearest zero), so the lowest is below -max |found|
+        found = int(np.sum(ev.real < float(out["floors"].max())))
+        if n_below > found:
+            notes.append(f"{n_below} negative eigenvalues by inertia (the {found} nearest zero listed); the lowest "
+                         f"is below {-np.abs(ev.real).max():.6g}")
+            lam_min = min(lam_min, -float(np.abs(ev.real).max()))
+    elif symmetric and out["method"] != "dense":
         # shift-invert finds the eigenvalues nearest sigma: count all negative ones (below the floor) by
         # inertia as a check -- from the LDL^T factors of K - sigma M the eigen-solver used when it had them
-        n_below, sigma = out.get("inertia", (-1, 0.0))
         floor_shift = -max(float(out["floors"].max()),
                            1e-3 * system.rod.bending_scale / (system.rod.rho_A * system.rod.length ** 4))
         shift, n_neg = sigma, n_below
@@ -672,8 +1101,12 @@ def stability(system, result, n_eigenvalues=6):
     if out["n_symmetry"]:
         notes.append(f"{out['n_symmetry']} symmetry mode(s) removed")
     res_max = float(out["residuals"][0])
-    if res_max > RESIDUAL_TOL:
-        notes.append(f"lowest eigenpair residual {res_max:.1e} (relative), round-off floor of the eigenvalue "
+    # (edge path: the residual's own round-off level, eps n^3 for a bending mode, is known; a residual at it is no
+    # sign of an inaccurate eigenpair -- the eigenvalue's error is quadratic in it)
+    res_level = float(out["residual_floors"][0]) if "residual_floors" in out else 0.0
+    if res_max > max(RESIDUAL_TOL, 10.0 * res_level):
+        level = f"; its round-off level {res_level:.1e}" if res_level else ""
+        notes.append(f"lowest eigenpair residual {res_max:.1e} (relative{level}), round-off floor of the eigenvalue "
                      f"{floor:.1e}")
     if abs(lam_min) <= floor:
         notes.append(f"lowest eigenvalue {lam_min:.3g} within its round-off floor {floor:.1e}: neutral, its sign "

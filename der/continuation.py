@@ -1008,7 +1008,8 @@ def _step(problem, settings, state, p, t, x_pred, natural, landing, branch):
                                    stability=False)
         if not result.converged:
             return None
-        problem.stiffness_from(result)
+        if settings["predictor"] == "tangent":
+            problem.stiffness_from(result)
         return problem.prepared(p_new, result.state), p_new, result.residual, result.iterations
     pred = state.copy()
     if not transport(problem.system(p), state, _free_part(problem, p, state, x_pred[:-1]), pred):

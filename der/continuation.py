@@ -39,7 +39,9 @@ extrapolated along a linear step: a clamp keeps its end edge's length, which a l
 ``method="natural"`` is the simpler natural-parameter continuation: p steps, each point a ``der.solve`` warm
 started from a secant predictor (``predictor="last"``: from the last point, its held DOFs moved to the new
 targets; ``predictor="tangent"``: along the path's tangent dq/dp at the last point, K dq/dp = dR/dp solved with
-the converged state's force Jacobian, contact Hessian included at the barrier stiffness that solve ended with).
+the converged state's force Jacobian, the exact contact Hessian included at the barrier stiffness that solve
+ended with; measured on the plectoneme it pays with the smooth barrier ``der.self_contact(r, samples=m)`` and
+steps of 1/8 turn, not with the segment barrier: docs/contact.md section 9.3).
 It stops at a fold. ``dp`` makes its steps a fixed parameter step (halved on a failed solve, grown back
 after a converged one, never above dp): a grid in p, with each point what ``der.solve`` finds from its warm start,
 snaps included (the tangent-continuity test, which halves adaptive steps whose secant turns by more than ~26
@@ -254,8 +256,8 @@ def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=
     dp : natural method only: a fixed parameter step (> 0; its sign follows ``direction``), halved on a failed
         solve (down to ds_min p_scale) and grown back after a converged one; None: arclength steps ``ds``.
     predictor : natural method only: "secant" (default), "last" (each solve starts from the last point) or
-        "tangent" (from the last point along the tangent of the path, K dq/dp = dR/dp at that point: one
-        factorisation per step; a start that would violate a contact distance is pulled back towards the last
+        "tangent" (from the last point along the tangent of the path, K dq/dp = dR/dp at that point, the
+        contact terms' exact Hessian in K: one factorisation per step; a start that would violate a contact distance is pulled back towards the last
         point, halving the step up to PREDICTOR_HALVINGS times, then the last point).
     perturb : natural method only: f(p, state) -> RodState or None, applied to each step's predicted start
         (None: unchanged), e.g. an imperfection while the rod is straight.
@@ -381,6 +383,9 @@ class _Problem:
         self.sparse_factorisations = 0
         self.rp_evaluations = 0
         self.kappas = None      # the contact terms' barrier stiffness of the last natural step's solve
+        # natural method, predictor "tangent": the tangent on the exact (unprojected) barrier Hessian -- the
+        # derivative of the equilibrium path; the PSD projection is the solver's globalisation, not the path's
+        self.exact_contact = settings.get("method") == "natural" and settings.get("predictor") == "tangent"
 
     def scene(self, p):
         scene = self.scene_of(float(p))
@@ -499,6 +504,9 @@ class _Problem:
         from .solvers.system import constrain_system, evaluate_system
 
         sys_ = self.system(p)
+        if self.exact_contact:
+            for term in sys_.terms:
+                term.project = False
         evaluate_system(sys_, state, 2)
         coo = getattr(sys_, "contact_coo", None)
         V = gauge_modes(sys_, state)

@@ -257,8 +257,9 @@ def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=
         solve (down to ds_min p_scale) and grown back after a converged one; None: arclength steps ``ds``.
     predictor : natural method only: "secant" (default), "last" (each solve starts from the last point) or
         "tangent" (from the last point along the tangent of the path, K dq/dp = dR/dp at that point, the
-        contact terms' exact Hessian in K: one factorisation per step; a start that would violate a contact distance is pulled back towards the last
-        point, halving the step up to PREDICTOR_HALVINGS times, then the last point).
+        contact terms' exact Hessian in K: one factorisation per step; a start that would violate a contact
+        distance is pulled back towards the last point, halving the step up to PREDICTOR_HALVINGS times, then
+        the last point).
     perturb : natural method only: f(p, state) -> RodState or None, applied to each step's predicted start
         (None: unchanged), e.g. an imperfection while the rod is straight.
     solve : a function with der.solve's arguments (scene, state=, options=, tol=, stability=) returning its

@@ -47,8 +47,8 @@ PARAMETERS = [
     ("perturb", 1e-3, float, "lateral imperfection (fraction of L) added to the start of every step before contact"),
     ("samples", None, int, "contact barrier on m sample points per edge (der.self_contact(r, samples=m): smooth, "
      "exact Newton; docs/contact.md section 9) instead of segment distances"),
-    ("predictor", "last", str, "each step's start: 'last' (the last point), 'secant' or 'tangent' (along dq/dN from the "
-     "last point's exact Hessian; with --samples and steps of 1/8 turn, docs/contact.md section 9.3)"),
+    ("predictor", "last", str, "each step's start: 'last' (the last point), 'secant' or 'tangent' (along dq/dN "
+     "from the last point's exact Hessian; with --samples and steps of 1/8 turn, docs/contact.md section 9.3)"),
     ("png", None, str, "write extension and torque against N to this PNG"),
 ]
 
@@ -151,7 +151,8 @@ def run(p, solver):
         "contacts": contacts,
     }
     branch = der.continuation(scene_of, 0.0, p.turns, parameter="turns", method="natural", dp=p.turns / p.sweep,
-                              predictor=getattr(p, "predictor", "last"), perturb=perturb, stability=False, tol=solver.args.tol,
+                              predictor=getattr(p, "predictor", "last"), perturb=perturb, stability=False,
+                              tol=solver.args.tol,
                               options=der.SolverOptions(max_iterations=MAX_ITERATIONS), summaries=summaries,
                               max_steps=8 * p.sweep, progress=False, keep_states=False, solve=solver.solve)
     steps = []

@@ -38,7 +38,11 @@ extrapolated along a linear step: a clamp keeps its end edge's length, which a l
 
 ``method="natural"`` is the simpler natural-parameter continuation: p steps, each point a ``der.solve`` warm
 started from a secant predictor (``predictor="last"``: from the last point, its held DOFs moved to the new
-targets). It stops at a fold. ``dp`` makes its steps a fixed parameter step (halved on a failed solve, grown back
+targets; ``predictor="tangent"``: along the path's tangent dq/dp at the last point, K dq/dp = dR/dp solved with
+the converged state's force Jacobian, the exact contact Hessian included at the barrier stiffness that solve
+ended with; measured on the plectoneme it pays with the smooth barrier ``der.self_contact(r, samples=m)`` and
+steps of 1/8 turn, not with the segment barrier: docs/contact.md section 9.3).
+It stops at a fold. ``dp`` makes its steps a fixed parameter step (halved on a failed solve, grown back
 after a converged one, never above dp): a grid in p, with each point what ``der.solve`` finds from its warm start,
 snaps included (the tangent-continuity test, which halves adaptive steps whose secant turns by more than ~26
 degrees, does not apply). ``perturb(p, state)`` may add an imperfection to each step's start (e.g. while a rod is
@@ -61,13 +65,14 @@ import numpy as np
 from .scene import Scene
 
 METHODS = ("arclength", "natural")
-PREDICTORS = ("secant", "last")
+PREDICTORS = ("secant", "last", "tangent")
 KINDS = ("fold", "bifurcation", "hopf", "target")
 GAUGE_REGULARISATION = 1e-12   # times diag|K|, only when the rod has free rigid motions (they are projected out)
 GAUGE_TOL = 1e-6               # |K v| <= GAUGE_TOL |K| |v|: a rigid motion the stiffness annihilates
 DENSE_EIGENVECTOR_MAX_DOFS = 2400
 GAUGE_ANGLE_WEIGHT = 1e-8        # rigid motions are fitted on the node coordinates (Problem.gauge_coordinates)
 RP_REUSE_RATE = 0.1            # the corrector keeps dR/dp while each Newton step cuts the residual 10x or more
+PREDICTOR_HALVINGS = 4         # natural method, predictor "tangent": halvings of a start that violates a contact
 TANGENT_COS = 0.9              # a step whose tangent turns by more than acos(0.9) = 26 degrees is halved
 
 
@@ -250,7 +255,11 @@ def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=
         with ``tight_bend="warn"``).
     dp : natural method only: a fixed parameter step (> 0; its sign follows ``direction``), halved on a failed
         solve (down to ds_min p_scale) and grown back after a converged one; None: arclength steps ``ds``.
-    predictor : natural method only: "secant" (default) or "last" (each solve starts from the last point).
+    predictor : natural method only: "secant" (default), "last" (each solve starts from the last point) or
+        "tangent" (from the last point along the tangent of the path, K dq/dp = dR/dp at that point, the
+        contact terms' exact Hessian in K: one factorisation per step; a start that would violate a contact
+        distance is pulled back towards the last point, halving the step up to PREDICTOR_HALVINGS times, then
+        the last point).
     perturb : natural method only: f(p, state) -> RodState or None, applied to each step's predicted start
         (None: unchanged), e.g. an imperfection while the rod is straight.
     solve : a function with der.solve's arguments (scene, state=, options=, tol=, stability=) returning its
@@ -374,6 +383,10 @@ class _Problem:
         self.weights = None
         self.sparse_factorisations = 0
         self.rp_evaluations = 0
+        self.kappas = None      # the contact terms' barrier stiffness of the last natural step's solve
+        # natural method, predictor "tangent": the tangent on the exact (unprojected) barrier Hessian -- the
+        # derivative of the equilibrium path; the PSD projection is the solver's globalisation, not the path's
+        self.exact_contact = settings.get("method") == "natural" and settings.get("predictor") == "tangent"
 
     def scene(self, p):
         scene = self.scene_of(float(p))
@@ -405,7 +418,18 @@ class _Problem:
                 self._systems.pop(next(iter(self._systems)))
             sys_ = build_system(self.scene(p), self.options)
             self._systems[p] = sys_
+        if self.kappas is not None:
+            for term, kappa in zip(sys_.terms, self.kappas):
+                if kappa is not None and getattr(term, "adaptive", False):
+                    term.kappa = kappa
         return sys_
+
+    def stiffness_from(self, result):
+        """Keep the adaptive barrier stiffness a natural step's solve ended with (``result.contact``): the tangent
+        at its point is taken on the energy that point is an equilibrium of."""
+        contact = getattr(result, "contact", None)
+        if contact and contact.get("terms"):
+            self.kappas = [t.get("kappa") for t in contact["terms"]]
 
     def prepared(self, p, state):
         """A copy of ``state`` with scene_of(p)'s constraint targets applied (frames transported)."""
@@ -481,6 +505,9 @@ class _Problem:
         from .solvers.system import constrain_system, evaluate_system
 
         sys_ = self.system(p)
+        if self.exact_contact:
+            for term in sys_.terms:
+                term.project = False
         evaluate_system(sys_, state, 2)
         coo = getattr(sys_, "contact_coo", None)
         V = gauge_modes(sys_, state)
@@ -841,7 +868,11 @@ def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_re
         return row
 
     tangents = []
-    if natural or along:
+    if natural and settings["predictor"] == "tangent" and not along:
+        t = problem.tangent(p, state, t_prev)
+        if t is None:
+            t = t_prev.copy()
+    elif natural or along:
         t = t_prev.copy()
     else:
         t = problem.tangent(p, state, t_prev)
@@ -897,7 +928,7 @@ def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_re
                     break
                 continue
             new_state, new_p, residual, iterations = out
-            t_new = _tangent_of(problem, new_state, new_p, state, p, t, natural)
+            t_new = _tangent_of(problem, new_state, new_p, state, p, t, natural, settings["predictor"])
             if dp is not None and t_new is None:
                 t_new = t.copy()
             if dp is None and t_new is None or (dp is None and not landing and ds > 2 * settings["ds_min"] and (
@@ -963,9 +994,18 @@ def _step(problem, settings, state, p, t, x_pred, natural, landing, branch):
     p_new = float(x_pred[-1])
     if natural:
         pred = state.copy()
-        if settings["predictor"] == "secant" and not transport(
+        if settings["predictor"] != "last" and not transport(
                 problem.system(p), state, _free_part(problem, p, state, x_pred[:-1]), pred):
             return None
+        if settings["predictor"] == "tangent":
+            # a tangent that runs into a contact: shorten the predicted displacement (the parameter step stays)
+            dx = x_pred[:-1] - state.q
+            for _ in range(PREDICTOR_HALVINGS):
+                if problem.admissible(p_new, pred):
+                    break
+                dx *= 0.5
+                if not transport(problem.system(p), state, _free_part(problem, p, state, state.q + dx), pred):
+                    return None
         if not problem.admissible(p_new, pred):
             pred = state.copy()        # a secant extrapolated into a contact: start from the last point
         if settings["perturb"] is not None:
@@ -977,6 +1017,8 @@ def _step(problem, settings, state, p, t, x_pred, natural, landing, branch):
                                    stability=False)
         if not result.converged:
             return None
+        if settings["predictor"] == "tangent":
+            problem.stiffness_from(result)
         return problem.prepared(p_new, result.state), p_new, result.residual, result.iterations
     pred = state.copy()
     if not transport(problem.system(p), state, _free_part(problem, p, state, x_pred[:-1]), pred):
@@ -992,9 +1034,11 @@ def _der_solve(scene, **kwargs):
     return solve(scene, raise_on_failure=False, **kwargs)
 
 
-def _tangent_of(problem, new_state, new_p, state, p, t, natural):
-    if not natural:
-        return problem.tangent(new_p, new_state, t)
+def _tangent_of(problem, new_state, new_p, state, p, t, natural, predictor="secant"):
+    if not natural or predictor == "tangent":
+        t_new = problem.tangent(new_p, new_state, t)
+        if t_new is not None or not natural:
+            return t_new
     # natural parameter: the secant
     d = np.append(new_state.q - state.q, new_p - p)
     n = problem.norm(d)

@@ -22,7 +22,8 @@ has the torque plateau M_p and extension slope dz/dN = -4 pi r / sin(2 theta) fr
 min_theta [A1 sin^4(theta) / (2 r^2) + F - M sin(2 theta) / (2 r)] = 0.
 
     python scenarios/plectoneme.py [--A1 1] [--A2 1.4925] [--L 20] [--radius 0.05] [--force 1]
-                                   [--turns 6] [--sweep 48] [--n 400] [--png PATH] [--json]
+                                   [--turns 6] [--sweep 48] [--n 400] [--samples m] [--predictor last]
+                                   [--png PATH] [--json]
 """
 import sys
 
@@ -46,6 +47,8 @@ PARAMETERS = [
     ("perturb", 1e-3, float, "lateral imperfection (fraction of L) added to the start of every step before contact"),
     ("samples", None, int, "contact barrier on m sample points per edge (der.self_contact(r, samples=m): smooth, "
      "exact Newton; docs/contact.md section 9) instead of segment distances"),
+    ("predictor", "last", str, "each step's start: 'last' (the last point), 'secant' or 'tangent' (along dq/dN "
+     "from the last point's exact Hessian; with --samples and steps of 1/8 turn, docs/contact.md section 9.3)"),
     ("png", None, str, "write extension and torque against N to this PNG"),
 ]
 
@@ -148,7 +151,8 @@ def run(p, solver):
         "contacts": contacts,
     }
     branch = der.continuation(scene_of, 0.0, p.turns, parameter="turns", method="natural", dp=p.turns / p.sweep,
-                              predictor="last", perturb=perturb, stability=False, tol=solver.args.tol,
+                              predictor=getattr(p, "predictor", "last"), perturb=perturb, stability=False,
+                              tol=solver.args.tol,
                               options=der.SolverOptions(max_iterations=MAX_ITERATIONS), summaries=summaries,
                               max_steps=8 * p.sweep, progress=False, keep_states=False, solve=solver.solve)
     steps = []
@@ -262,6 +266,10 @@ def validate(p):
             raise ValueError(f"--{name} must be > 0; got {getattr(p, name)}")
     if p.sweep < 1:
         raise ValueError(f"--sweep must be >= 1; got {p.sweep}")
+    from der.continuation import PREDICTORS
+
+    if getattr(p, "predictor", "last") not in PREDICTORS:
+        raise ValueError(f"--predictor must be one of {PREDICTORS}; got {p.predictor!r}")
     if p.turns / p.sweep > 0.25:
         raise ValueError(f"--sweep {p.sweep} is too coarse for --turns {p.turns}: at most 1/4 turn per step "
                          f"(--sweep >= {int(np.ceil(4 * p.turns))})")

@@ -174,12 +174,9 @@ def test_michell_threshold_located_and_the_writhing_branch_followed():
     assert check.iterations <= 1 and np.abs(check.state.q - last.q).max() < 1e-6
 
 
-def test_continuation_through_self_contact_uses_the_sparse_factorisation():
-    """Past Michell's threshold the naturally straight ring (n = 40, rod radius 0.05) writhes into self-contact;
-    from there der.continuation follows it in the imposed twist with contact pairs active: the bordered Newton
-    factorises band + contact Hessian sparsely, Lk = Tw + Wr stays twist / 2 pi, and every point is an
-    equilibrium by der.solve's measure with its strands at least 2r apart."""
-    n, r = 40, 0.05
+def writhed_ring(n, r):
+    """(scene_of(twist), twist, the solved start) of the naturally straight ring twisted to twice Michell's threshold
+    and writhed into self-contact (rod radius r)."""
     rod, _ = michell_ring(n)
     twist = 2.0 * cf.michell_twist(1.0, 1.5)
 
@@ -194,6 +191,16 @@ def test_continuation_through_self_contact_uses_the_sparse_factorisation():
     start = der.solve(scene_of(twist), state=welded.displaced(welded.rest_state(), kick, twist * np.arange(n) / n),
                       stability=False)
     assert start.contact["n_contacts"] > 0 and writhe(scene_of(twist), start.state) > 1.0
+    return scene_of, twist, start
+
+
+def test_continuation_through_self_contact_uses_the_sparse_factorisation():
+    """Past Michell's threshold the naturally straight ring (n = 40, rod radius 0.05) writhes into self-contact;
+    from there der.continuation follows it in the imposed twist with contact pairs active: the bordered Newton
+    factorises band + contact Hessian sparsely, Lk = Tw + Wr stays twist / 2 pi, and every point is an
+    equilibrium by der.solve's measure with its strands at least 2r apart."""
+    r = 0.05
+    scene_of, twist, start = writhed_ring(40, r)
     branch = der.continuation(scene_of, twist, twist + 1.0, state=start.state, parameter="twist", ds=0.2,
                               max_steps=3, locate=False, summaries={"writhe": writhe, "lk_error": lk_error})
     assert len(branch.points) == 4, branch.message
@@ -274,3 +281,54 @@ def test_import_der_loads_neither_dask_nor_matplotlib():
             "('dask', 'distributed', 'matplotlib', 'tqdm', 'pandas')]; print(heavy)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_natural_tangent_predictor_starts_each_solve_nearer_its_equilibrium():
+    """predictor="tangent" (natural method) starts each step along dq/dp = K^-1 dR/dp of the last point, an
+    O(dp^2) prediction, against the O(dp) of starting from the last point: on a cantilever bent by a growing end
+    force (a smooth branch) its starts lie much nearer the equilibria the solves reach, the branch is the same, and
+    the solves take fewer iterations."""
+    rod = der.rod_from_shape(der.shapes.straight(1.0, 16), 1.0, 1.5)
+
+    def scene_of(force):
+        return der.Scene(rod, loads=[der.end_force([0.0, force, 0.0])], constraints=[der.clamp("start")])
+
+    runs = {}
+    for predictor in ("last", "tangent"):
+        starts = []
+
+        def solve(scene, state=None, **kw):
+            r = der.solve(scene, state=state, raise_on_failure=False, **kw)
+            if state is not None:
+                starts.append((np.abs(state.q - r.state.q).max(), r.iterations))
+            return r
+
+        branch = der.continuation(scene_of, 0.5, 3.5, method="natural", parameter="force", dp=0.5,
+                                  predictor=predictor, stability=False, solve=solve, keep_states=True)
+        assert branch.status == "completed", branch.message
+        runs[predictor] = (branch, np.array(starts))
+    (b_last, s_last), (b_tan, s_tan) = runs["last"], runs["tangent"]
+    assert len(b_last.points) == len(b_tan.points) == 7
+    for a, b in zip(b_last.states, b_tan.states):
+        assert np.abs(a.q - b.q).max() < 1e-6                      # the same equilibria
+    # every step's start: the tangent's error is a small fraction of the last point's
+    assert np.all(s_tan[:, 0] < 0.2 * s_last[:, 0]), (s_tan[:, 0], s_last[:, 0])
+    assert s_tan[:, 1].sum() < s_last[:, 1].sum()
+
+
+def test_natural_tangent_predictor_through_self_contact():
+    """predictor="tangent" with contact pairs active (the writhed ring of the test above): the tangent is taken on
+    band + exact contact Hessian at the solve's barrier stiffness, its starts stay admissible (pulled back if not),
+    and every point is an equilibrium with Lk = twist / 2 pi and the strands at least 2r apart."""
+    r = 0.05
+    scene_of, twist, start = writhed_ring(40, r)
+    branch = der.continuation(scene_of, twist, twist + 0.5, state=start.state, parameter="twist", method="natural",
+                              dp=0.25, predictor="tangent", stability=False,
+                              summaries={"writhe": writhe, "lk_error": lk_error})
+    assert branch.status == "completed" and len(branch.points) == 3, branch.message
+    assert branch.sparse_factorisations > 0              # the tangents were solved with the contact Hessian
+    assert all(p["lk_error"] < 1e-9 for p in branch.points)
+    for p, state in zip(branch.points[1:], branch.states[1:]):
+        check = der.solve(scene_of(p["twist"]), state=state, stability=False)
+        assert check.iterations <= 1 and np.abs(check.state.q - state.q).max() < 1e-6
+        assert check.contact["n_contacts"] > 0 and check.contact["min_distance"] >= 2 * r

@@ -928,6 +928,12 @@ def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_re
                     break
                 continue
             new_state, new_p, residual, iterations = out
+            if natural and dp is None and abs(new_p - p) < 0.1 * settings["ds_min"] * problem.p_scale:
+                # the secant has turned across p (a fold): its steps converge but no longer advance p
+                status, message = "step_too_small", (
+                    f"{parameter} advanced only {abs(new_p - p):.3g} from {p:.8g}, less than a tenth of the smallest "
+                    f"step {settings['ds_min'] * problem.p_scale:.3g} (natural continuation stops at a fold)")
+                break
             t_new = _tangent_of(problem, new_state, new_p, state, p, t, natural, settings["predictor"])
             if dp is not None and t_new is None:
                 t_new = t.copy()

@@ -265,6 +265,8 @@ def main(argv=None):
     ap.add_argument("--from-json", default=None, metavar="JSON",
                     help="only re-plot --png from the saved output of --json (no solve)")
     ap.add_argument("--no-trace", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--time-budget", type=float, default=120.0,
+                    help="wall-clock budget of each solve in seconds (default 120; a loaded machine may need more)")
     args = ap.parse_args(argv)
     if args.png:
         from der.plotting import require_matplotlib
@@ -282,15 +284,16 @@ def main(argv=None):
         _plot(json.loads(text[-1])["rows"], args.png)   # the last line of a --json run
         return
     if args.single:
-        print(json.dumps(single(args.single[0], int(args.single[1]), trace=not args.no_trace)))
+        print(json.dumps(single(args.single[0], int(args.single[1]), time_budget=args.time_budget,
+                                trace=not args.no_trace)))
         return
     if args.million:
         return million(args)
     rows = []
     for problem in args.problems:
         for n in args.n:
-            out = subprocess.run([sys.executable, __file__, "--single", problem, str(n)], capture_output=True,
-                                 text=True)
+            out = subprocess.run([sys.executable, __file__, "--single", problem, str(n), "--time-budget",
+                                  str(args.time_budget)], capture_output=True, text=True)
             try:
                 r = json.loads(out.stdout.strip().splitlines()[-1])
             except (ValueError, IndexError):
@@ -333,8 +336,8 @@ def main(argv=None):
 
 def million(args):
     """The 10^6-edge helix (stretched and overwound between clamps) in a fresh process."""
-    out = subprocess.run([sys.executable, __file__, "--single", "helix_winding", "1000000", "--no-trace"],
-                         capture_output=True, text=True)
+    out = subprocess.run([sys.executable, __file__, "--single", "helix_winding", "1000000", "--no-trace",
+                          "--time-budget", str(args.time_budget)], capture_output=True, text=True)
     try:
         r = json.loads(out.stdout.strip().splitlines()[-1])
     except (ValueError, IndexError):

@@ -162,9 +162,11 @@ def band_to_sparse(ab, kl, ku, perm):
 
 # band_solve: the symmetric LDL^T path's acceptance test, the componentwise backward error of the solution
 # max_i |A x - b|_i / (|A| |x| + |b|)_i (Oettli-Prager: x solves a system whose every entry is that close to A's
-# and b's). LAPACK's dgbsv with partial pivoting lands at a few eps; LDL^T without pivoting of a well-conditioned
-# matrix too, and one step of refinement takes an error from a small skew part or a growing pivot down to that.
-LDLT_BACKWARD_ERROR = 1e-13
+# and b's). Measured for LAPACK's dgbsv (LU with partial pivoting) on the indefinite Newton matrix of the wound
+# helix (tools/scaling.py) at its start: 6.4e-12 (10^5 edges), 7.3e-12 (3 10^5); LDL^T refined there reaches
+# 2.6e-14 and 5.5e-13. Accepted: no worse than 1e-11, what dgbsv itself delivers on these systems. (At 10^6
+# edges, 3111 negative pivots, refinement stops at 1.3e-11 against dgbsv's 4.7e-12: refused, dgbsv solves.)
+LDLT_BACKWARD_ERROR = 1e-11
 LDLT_REFINEMENTS = 3
 # after a refused LDL^T, a band_solve with the same BandLDLT goes straight to dgbsv this many times before it
 # tries again: a Newton matrix whose skew part defeats refinement (the load stiffness of an end torque on a ring
@@ -179,24 +181,33 @@ USE_LDLT = True
 
 class BandLDLT:
     """Work arrays of the symmetric band factorisation ``band_ldlt_compact`` for matrices of ``n`` rows and
-    half-bandwidth ``b``, reused from solve to solve (``band_solve(..., ldlt=...)``: no allocation, and no first
+    half-bandwidth ``b`` (allocated by the first solve that uses them), reused from solve to solve (``band_solve(..., ldlt=...)``: no allocation, and no first
     touch of fresh pages, per Newton iteration). After a solve that used it: ``L``, ``D`` the factors of the
     symmetric part of the last matrix factorised (in band order) and ``negatives`` its number of negative
     pivots (= negative eigenvalues, Sylvester's law of inertia), ``accepted`` whether its solution passed the
     backward-error test (else the solve went to dgbsv), ``backward_error`` the error reached."""
 
     def __init__(self, n, b):
-        self.L = np.empty((n, b))        # L[j, s - 1] = l_{j+s, j}: column j of the unit lower factor, contiguous
-        self.D = np.empty(n)
-        self.r = np.empty(n)
-        self.x = np.empty(n)
+        self.n, self.b = n, b
+        self.release()
         self.negatives = -1
         self.accepted = False
         self.backward_error = np.inf
         self.skip = 0           # band solves left to send straight to dgbsv after a refusal (LDLT_RETRY_AFTER)
 
-    def fits(self, n, b):
-        return self.D.shape[0] == n and self.L.shape[1] == b
+    def release(self):
+        """Drop the work arrays (allocated again by the next solve that uses them): after a refused
+        factorisation, so that the dgbsv solves that follow do not carry them (10^6 edges: 416 MB)."""
+        self.L = self.D = self.r = self.x = None
+
+    def ensure(self, n, b):
+        """The work arrays for ``n`` rows and half-bandwidth ``b`` (allocated if missing or of another size)."""
+        if self.L is None or self.L.shape != (n, b):
+            self.n, self.b = n, b
+            self.L = np.empty((n, b))    # L[j, s - 1] = l_{j+s, j}: column j of the unit lower factor, contiguous
+            self.D = np.empty(n)
+            self.r = np.empty(n)
+            self.x = np.empty(n)
 
 
 @njit(cache=True)
@@ -370,8 +381,9 @@ def band_solve(ab, kl, ku, perm, rhs, overwrite=True, ldlt=None):
         ldlt.skip -= 1
         ldlt.accepted, ldlt.negatives, ldlt.backward_error = False, -1, np.inf
     elif USE_LDLT and kl == ku and ab.shape[0] == 2 * kl + ku + 1 and n > 0:
-        if ldlt is None or not ldlt.fits(n, kl):
+        if ldlt is None:
             ldlt = BandLDLT(n, kl)
+        ldlt.ensure(n, kl)
         ldlt.accepted, ldlt.backward_error = False, np.inf
         ldlt.negatives = band_ldlt_compact(ab, kl, ku, ldlt.L, ldlt.D)
         if ldlt.negatives >= 0:
@@ -394,6 +406,7 @@ def band_solve(ab, kl, ku, perm, rhs, overwrite=True, ldlt=None):
                 return xs.reshape(rhs.shape), 0
         BAND_SOLVES["ldlt_refused"] += 1
         ldlt.skip = LDLT_RETRY_AFTER
+        ldlt.release()
     b = np.empty_like(rhs)
     b[perm] = rhs
     BAND_SOLVES["dgbsv"] += 1

@@ -3,8 +3,10 @@
 The stiffness of an open rod is banded in the interleaved DOF order (half-bandwidth 10: a vertex stencil spans
 11 consecutive DOFs). A ring wraps around; reordering its nodes as 0, N-1, 1, N-2, 2, ... ("folding" the ring)
 makes it banded again with half-bandwidth 19. Matrices are kept in LAPACK general-band storage
-``ab[kl + ku + i - j, j] = A[i, j]`` (with ``kl`` spare rows for pivoting) and factorised with ``dgbsv``;
-nothing is ever dense.
+``ab[kl + ku + i - j, j] = A[i, j]`` (with ``kl`` spare rows for pivoting); ``band_solve`` factorises a band
+with kl = ku by LDL^T without pivoting of its symmetric lower triangle (a quarter of the flops of banded LU),
+refines the solution against the band and accepts it on its componentwise backward error, else solves with
+LAPACK's ``dgbsv`` (issue 17). Nothing is ever dense.
 """
 import numpy as np
 from numba import njit

@@ -964,7 +964,7 @@ class _NewmarkRun(_Run):
 
                     delta, info = _contact_solve(sysm, work, coo, R)
                 else:
-                    delta, info = band_solve(work, sysm.kl, sysm.ku, sysm.perm, R)
+                    delta, info = band_solve(work, sysm.kl, sysm.ku, sysm.perm, R, ldlt=getattr(sysm, "ldlt", None))
                 self.newton += 1
                 if info != 0 or not np.all(np.isfinite(delta)):
                     return False, ("newton_failed", f"singular or non-finite Newton system at t = {t1:g}")

@@ -3,8 +3,10 @@
 The stiffness of an open rod is banded in the interleaved DOF order (half-bandwidth 10: a vertex stencil spans
 11 consecutive DOFs). A ring wraps around; reordering its nodes as 0, N-1, 1, N-2, 2, ... ("folding" the ring)
 makes it banded again with half-bandwidth 19. Matrices are kept in LAPACK general-band storage
-``ab[kl + ku + i - j, j] = A[i, j]`` (with ``kl`` spare rows for pivoting) and factorised with ``dgbsv``;
-nothing is ever dense.
+``ab[kl + ku + i - j, j] = A[i, j]`` (with ``kl`` spare rows for pivoting); ``band_solve`` factorises a band
+with kl = ku by LDL^T without pivoting of its symmetric lower triangle (a quarter of the flops of banded LU),
+refines the solution against the band and accepts it on its componentwise backward error, else solves with
+LAPACK's ``dgbsv`` (issue 17). Nothing is ever dense.
 """
 import numpy as np
 from numba import njit
@@ -160,16 +162,258 @@ def band_to_sparse(ab, kl, ku, perm):
     return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
 
 
-def band_solve(ab, kl, ku, perm, rhs, overwrite=True):
-    """Solve A x = rhs (A in band storage; ``ab`` is overwritten by its LU factors).
+# band_solve: the symmetric LDL^T path's acceptance test, the componentwise backward error of the solution
+# max_i |A x - b|_i / (|A| |x| + |b|)_i (Oettli-Prager: x solves a system whose every entry is that close to A's
+# and b's). LDL^T refined reaches 2.6e-14 and 5.5e-13 on the wound helix's indefinite Newton matrix at its start
+# (tools/scaling.py, 10^5 and 3 10^5 edges), where LAPACK's dgbsv itself reaches 6.4e-12 and 7.3e-12; at 10^6
+# edges (3111 negative pivots) refinement stops at 1.3e-11 (dgbsv: 4.7e-12) and the solve goes to dgbsv.
+# 1e-11 (dgbsv's level) let the writhed ring of test_stability end at another state (its symmetry analysis then
+# failed): kept at 1e-13.
+LDLT_BACKWARD_ERROR = 1e-13
+LDLT_REFINEMENTS = 3
+# after a refused LDL^T, a band_solve with the same BandLDLT goes straight to dgbsv this many times before it
+# tries again: a Newton matrix whose skew part defeats refinement (the load stiffness of an end torque on a ring
+# against its soft modes) stays so from iteration to iteration, and each refusal costs about one dgbsv
+LDLT_RETRY_AFTER = 8
+# which solver each band_solve used: the symmetric LDL^T (accepted), or dgbsv (by design: kl != ku, or after
+# the LDL^T was refused: a zero pivot or a backward error that refinement did not bring down)
+BAND_SOLVES = {"ldlt": 0, "dgbsv": 0, "ldlt_refused": 0}
+# False: band_solve always uses dgbsv (the comparison runs of tools/bench_kernels.py and tools/scaling.py)
+USE_LDLT = True
 
-    Returns ``(x, info)``; ``info > 0`` means an exactly singular pivot (x is then invalid).
+
+class BandLDLT:
+    """Work arrays of the symmetric band factorisation ``band_ldlt_compact`` for matrices of ``n`` rows and
+    half-bandwidth ``b`` (allocated by the first solve that uses them), reused from solve to solve (``band_solve(..., ldlt=...)``: no allocation, and no first
+    touch of fresh pages, per Newton iteration). After a solve that used it: ``L``, ``D`` the factors of the
+    symmetric part of the last matrix factorised (in band order) and ``negatives`` its number of negative
+    pivots (= negative eigenvalues, Sylvester's law of inertia), ``accepted`` whether its solution passed the
+    backward-error test (else the solve went to dgbsv), ``backward_error`` the error reached."""
+
+    def __init__(self, n, b):
+        self.n, self.b = n, b
+        self.release()
+        self.negatives = -1
+        self.accepted = False
+        self.backward_error = np.inf
+        self.skip = 0           # band solves left to send straight to dgbsv after a refusal (LDLT_RETRY_AFTER)
+
+    def release(self):
+        """Drop the work arrays (allocated again by the next solve that uses them): after a refused
+        factorisation, so that the dgbsv solves that follow do not carry them (10^6 edges: 416 MB)."""
+        self.L = self.D = self.r = self.x = None
+
+    def ensure(self, n, b):
+        """The work arrays for ``n`` rows and half-bandwidth ``b`` (allocated if missing or of another size)."""
+        if self.L is None or self.L.shape != (n, b):
+            self.n, self.b = n, b
+            self.L = np.empty((n, b))    # L[j, s - 1] = l_{j+s, j}: column j of the unit lower factor, contiguous
+            self.D = np.empty(n)
+            self.r = np.empty(n)
+            self.x = np.empty(n)
+
+
+@njit(cache=True)
+def band_ldlt_compact(ab, kl, ku, L, D):
+    """LDL^T factorisation without pivoting of the symmetric matrix M whose lower triangle is that of the band
+    matrix A in ``ab`` (LAPACK general-band storage, ``kl`` = ``ku`` = b; not modified: M = A for a symmetric A,
+    otherwise the solves refine against A), into ``L`` (n, b) -- ``L[j, s - 1]`` = l_{j+s, j}, each column of
+    the factor contiguous: the triangular solves then stream it (measured 5-8x faster than reading a factor kept
+    in the spare rows of the general-band storage, one column every 2 kl + ku + 1 doubles) -- and the pivots
+    ``D``. Right-looking by columns, the trailing b columns updated in ``L`` and ``D`` themselves (each enters
+    from ``ab`` b steps before its turn): O(n b^2) flops, a quarter of banded LU with partial pivoting. Compiled
+    with ``kl`` a constant for der's two bandwidths (10: an open rod, 19: a folded ring; its short loops unrolled,
+    measured 1.5-1.8x faster).
+    Returns the number of negative pivots (the inertia of M, Sylvester), or -1 on a zero or non-finite pivot."""
+    # the half-bandwidths of der's bands spelled out: the kernel is inlined with b a constant (a literal-typed
+    # dispatch from Python costs milliseconds per call)
+    if kl == 10:
+        return _band_ldlt_compact(ab, 10, ku, L, D)
+    if kl == 19:
+        return _band_ldlt_compact(ab, 19, ku, L, D)
+    return _band_ldlt_compact(ab, kl, ku, L, D)
+
+
+@njit(cache=True, inline="always")
+def _band_ldlt_compact(ab, b, ku, L, D):
+    n = ab.shape[1]
+    off = b + ku
+    l = np.empty(b)
+    negatives = 0
+    for c in range(min(n, b)):               # the first b columns, before their turn
+        D[c] = ab[off, c]
+        for s in range(1, b + 1):
+            L[c, s - 1] = ab[off + s, c] if c + s < n else 0.0
+    for k in range(n):
+        c = k + b                            # column k + b enters
+        if c < n:
+            D[c] = ab[off, c]
+            for s in range(1, b + 1):
+                L[c, s - 1] = ab[off + s, c] if c + s < n else 0.0
+        dk = D[k]
+        if dk == 0.0 or not np.isfinite(dk):
+            return -1
+        if dk < 0.0:
+            negatives += 1
+        inv = 1.0 / dk
+        for s in range(b):
+            l[s] = L[k, s] * inv
+            L[k, s] = l[s]
+        if k + b < n:                        # rank-1 update of the trailing columns k+1..k+b (full width)
+            for t in range(1, b + 1):
+                lt = l[t - 1] * dk
+                D[k + t] -= l[t - 1] * lt
+                for u in range(b - t):       # row k + t + 1 + u of column k + t
+                    L[k + t, u] -= l[u + t] * lt
+        else:
+            for t in range(1, n - k):
+                lt = l[t - 1] * dk
+                D[k + t] -= l[t - 1] * lt
+                for u in range(b - t):
+                    L[k + t, u] -= l[u + t] * lt
+    return negatives
+
+
+@njit(cache=True, inline="always")
+def _ldlt_compact_solve(L, D, y, b):
+    """y <- (L D L^T)^-1 y in place (band order), with the factors of ``band_ldlt_compact`` (``b`` = L.shape[1])."""
+    n = L.shape[0]
+    for k in range(n):                       # L z = y, by columns of L
+        yk = y[k]
+        for s in range(1, min(b, n - 1 - k) + 1):
+            y[k + s] -= L[k, s - 1] * yk
+    for k in range(n):
+        y[k] /= D[k]
+    for k in range(n - 1, -1, -1):           # L^T x = z
+        acc = y[k]
+        for s in range(1, min(b, n - 1 - k) + 1):
+            acc -= L[k, s - 1] * y[k + s]
+        y[k] = acc
+
+
+@njit(cache=True, inline="always")
+def _band_residual(ab, kl, ku, x, rhs, r):
+    """r = rhs - A x (band order, A in rows kl.. of the general-band storage) and the componentwise backward
+    error max_i |r_i| / (|A| |x| + |rhs|)_i, in one pass over the band (a row whose residual is 0 counts 0; one
+    with a residual and a zero denominator: infinity)."""
+    n = ab.shape[1]
+    off = kl + ku
+    s = np.empty(n)
+    for i in range(n):
+        r[i] = rhs[i]
+        s[i] = abs(rhs[i])
+    for j in range(n):
+        xj = x[j]
+        axj = abs(xj)
+        for i in range(max(0, j - ku), min(n - 1, j + kl) + 1):
+            a = ab[off + i - j, j]
+            r[i] -= a * xj
+            s[i] += abs(a) * axj
+    worst = 0.0
+    for i in range(n):
+        ri = abs(r[i])
+        if ri == 0.0:
+            continue
+        if not (s[i] > 0.0) or not np.isfinite(ri):
+            return np.inf
+        worst = max(worst, ri / s[i])
+    return worst
+
+
+@njit(cache=True)
+def _ldlt_solve_refined(ab, kl, ku, L, D, bp, x, r, tol, refinements):
+    """x with A x = bp (band order) from the LDL^T of A's symmetric part (``band_ldlt_compact``), refined against
+    A itself (x += M^-1 (bp - A x): a non-symmetric A converges as fast as its skew part is small) until the
+    backward error is at most ``tol``. Returns the backward error reached. (``kl`` = ``ku`` constants for der's
+    two bandwidths, as in ``band_ldlt_compact``.)"""
+    if kl == 10 and ku == 10:
+        return _ldlt_solve_refined_b(ab, 10, 10, L, D, bp, x, r, tol, refinements)
+    if kl == 19 and ku == 19:
+        return _ldlt_solve_refined_b(ab, 19, 19, L, D, bp, x, r, tol, refinements)
+    return _ldlt_solve_refined_b(ab, kl, ku, L, D, bp, x, r, tol, refinements)
+
+
+@njit(cache=True, inline="always")
+def _ldlt_solve_refined_b(ab, kl, ku, L, D, bp, x, r, tol, refinements):
+    for i in range(x.shape[0]):
+        x[i] = bp[i]
+    _ldlt_compact_solve(L, D, x, kl)
+    err = _band_residual(ab, kl, ku, x, bp, r)
+    for _ in range(refinements):
+        if err <= tol:
+            break
+        _ldlt_compact_solve(L, D, r, kl)
+        for i in range(x.shape[0]):
+            x[i] += r[i]
+        last = err
+        err = _band_residual(ab, kl, ku, x, bp, r)
+        if not err <= 0.1 * last:
+            break        # not contracting (a skew part as stiff as the softest mode): refused, no more passes
+    return err
+
+
+@njit(cache=True)
+def _is_identity(perm):
+    for d in range(perm.shape[0]):
+        if perm[d] != d:
+            return False
+    return True
+
+
+def band_solve(ab, kl, ku, perm, rhs, overwrite=True, ldlt=None):
+    """Solve A x = rhs (A in general-band storage, ``rhs`` (n,) or (n, k) in DOF order); ``ab`` is overwritten
+    by factors (with ``overwrite``; else a copy is factorised).
+
+    A band with kl = ku is first factorised by LDL^T without pivoting of its symmetric part
+    (``band_ldlt_compact``: a quarter of the flops of banded LU; ``ab`` untouched), each solution refined against
+    A and accepted only when its componentwise backward error is at most LDLT_BACKWARD_ERROR (what LU with partial
+    pivoting achieves); otherwise -- a zero pivot, an indefinite matrix whose pivots grow, a skew part too large
+    -- the same ``ab`` goes to LAPACK's ``dgbsv``. ``ldlt``: a ``BandLDLT`` whose work arrays are reused (and
+    which then holds the factors and the inertia of the last matrix); ``BAND_SOLVES`` counts the paths.
+
+    Returns ``(x, info)``; ``info > 0`` means an exactly singular pivot of dgbsv (x is then invalid).
     """
     from scipy.linalg.lapack import dgbsv
 
+    if not overwrite:
+        ab = ab.copy(order="F")
+    rhs = np.asarray(rhs, dtype=float)
+    n = ab.shape[1]
+    identity = _is_identity(perm)
+    if ldlt is not None and ldlt.skip > 0:
+        ldlt.skip -= 1
+        ldlt.accepted, ldlt.negatives, ldlt.backward_error = False, -1, np.inf
+    elif USE_LDLT and kl == ku and ab.shape[0] == 2 * kl + ku + 1 and n > 0:
+        if ldlt is None:
+            ldlt = BandLDLT(n, kl)
+        ldlt.ensure(n, kl)
+        ldlt.accepted, ldlt.backward_error = False, np.inf
+        ldlt.negatives = band_ldlt_compact(ab, kl, ku, ldlt.L, ldlt.D)
+        if ldlt.negatives >= 0:
+            # (no copies of a vector beyond the solution: a 10^6-edge rod's vectors are 32 MB each)
+            cols = rhs.reshape(n, -1)
+            xs = np.empty_like(cols)
+            worst = 0.0
+            for c in range(cols.shape[1]):
+                bc = np.ascontiguousarray(cols[:, c]) if identity else cols[:, c][np.argsort(perm)]
+                err = _ldlt_solve_refined(ab, kl, ku, ldlt.L, ldlt.D, bc, ldlt.x, ldlt.r, LDLT_BACKWARD_ERROR,
+                                          LDLT_REFINEMENTS)
+                worst = max(worst, err)
+                if not err <= LDLT_BACKWARD_ERROR:
+                    break
+                xs[:, c] = ldlt.x if identity else ldlt.x[perm]
+            ldlt.backward_error = worst
+            if worst <= LDLT_BACKWARD_ERROR:
+                ldlt.accepted = True
+                BAND_SOLVES["ldlt"] += 1
+                return xs.reshape(rhs.shape), 0
+        BAND_SOLVES["ldlt_refused"] += 1
+        ldlt.skip = LDLT_RETRY_AFTER
+        ldlt.release()
     b = np.empty_like(rhs)
     b[perm] = rhs
-    _, _, xp, info = dgbsv(kl, ku, ab, b, overwrite_ab=overwrite, overwrite_b=True)
+    BAND_SOLVES["dgbsv"] += 1
+    _, _, xp, info = dgbsv(kl, ku, ab, b, overwrite_ab=True, overwrite_b=True)
     return xp[perm], info
 
 

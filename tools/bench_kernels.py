@@ -13,7 +13,8 @@ Side by side in the same run (issue 17): the gradient + band Hessian assembly ag
 (``hess_over_grad``; the gradient is der's order-1 pass, which sums exactly as the assembly, and
 ``grad_separate_s`` the three separate passes it replaced), the assembly as it was before issue 17
 (``hess_legacy_s``, kept below as the baseline: row-by-row scattering, bending and twisting scattered in two
-passes) and one LAPACK ``dgbsv`` on the same band (``dgbsv_s``), the floor of a Newton iteration.
+passes) and one LAPACK ``dgbsv`` on the same band (``dgbsv_s``), the floor of a Newton iteration, beside der's
+``band_solve`` (``ldlt_solve_s``: symmetric LDL^T refined against the band and checked, else dgbsv).
 """
 import argparse
 import json
@@ -28,7 +29,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 import der  # noqa: E402
 from der.geometry import transport_frames  # noqa: E402
-from der.linalg import band_layout, band_solve, new_band  # noqa: E402
+from der import linalg  # noqa: E402
+from der.linalg import BandLDLT, band_layout, band_solve, new_band  # noqa: E402
 from der.scene import evaluate, make_plan  # noqa: E402
 from numba import njit  # noqa: E402
 from der.energies.bend import _bend_local, bend_gradient  # noqa: E402
@@ -312,7 +314,17 @@ def main(argv=None):
 
         def dgbsv():   # LAPACK factor-and-solve of the band (on a copy: it overwrites); the copy is timed apart
             work[:] = ab
-            band_solve(work, kl, ku, perm, rhs)
+            linalg.USE_LDLT = False
+            try:
+                band_solve(work, kl, ku, perm, rhs)
+            finally:
+                linalg.USE_LDLT = True
+
+        ldlt_work = BandLDLT(rod.n_dof, kl)
+
+        def ldlt():    # der's band_solve: symmetric LDL^T, refined against the band, checked (else dgbsv)
+            work[:] = ab
+            band_solve(work, kl, ku, perm, rhs, ldlt=ldlt_work)
 
         def copy():
             work[:] = ab
@@ -341,7 +353,11 @@ def main(argv=None):
         assert separate_diff < 1e-12, separate_diff
         # a solvable band for the dgbsv timing: a dominant diagonal
         ab[:, :] += 1e3 * np.abs(ab).max() * (np.arange(ab.shape[0]) == kl + ku)[:, None]
-        t_solve = max(timed(dgbsv, args.repeat) - timed(copy, args.repeat), 1e-9)
+        t_copy = timed(copy, args.repeat)
+        t_solve = max(timed(dgbsv, args.repeat) - t_copy, 1e-9)
+        solves0 = dict(linalg.BAND_SOLVES)
+        t_ldlt = max(timed(ldlt, args.repeat) - t_copy, 1e-9)
+        ldlt_accepted = linalg.BAND_SOLVES["ldlt"] > solves0["ldlt"]
         numba_hess()
         r = {"n": n, "grad_numba_s": timed(numba_grad, args.repeat),
              "grad_numpy_s": timed(lambda: numpy_evaluate(rod, st.q, st.d1, st.reference_twist, k, lam, False,
@@ -351,6 +367,7 @@ def main(argv=None):
              "hess_numba_s": timed(numba_hess, args.repeat),
              "hess_legacy_s": timed(legacy_hess, args.repeat),
              "dgbsv_s": t_solve, "max_rel_diff_legacy": legacy_diff,
+             "ldlt_solve_s": t_ldlt, "ldlt_accepted": ldlt_accepted, "ldlt_over_dgbsv": t_ldlt / t_solve,
              "hess_numpy_s": timed(lambda: numpy_evaluate(rod, st.q, st.d1, st.reference_twist, k, lam, True,
                                                           kl, ku, perm), args.repeat),
              "max_rel_diff_grad": g_err, "max_rel_diff_hess": h_err}
@@ -379,11 +396,14 @@ def main(argv=None):
     print("assembly of gradient + band Hessian against the gradient alone, der's against the pre-issue-17 kernel "
           "(same run), and one dgbsv of the same band:")
     print(f"{'n':>7} {'hess/grad':>10} {'hess/grad_sep':>14} {'legacy/grad':>12} {'legacy/new':>11} {'dgbsv s':>10} "
-          f"{'hess/dgbsv':>11} {'grad/dgbsv':>11}")
+          f"{'hess/dgbsv':>11} {'grad/dgbsv':>11} {'ldlt s':>10} {'ldlt/dgbsv':>11}")
     for r in rows:
         print(f"{r['n']:>7} {r['hess_over_grad']:>10.1f} {r['hess_over_grad_separate']:>14.1f} "
               f"{r['hess_legacy_over_grad']:>12.1f} {r['legacy_over_new']:>11.2f} {r['dgbsv_s']:>10.2e} "
-              f"{r['hess_numba_s'] / r['dgbsv_s']:>11.2f} {r['grad_numba_s'] / r['dgbsv_s']:>11.2f}")
+              f"{r['hess_numba_s'] / r['dgbsv_s']:>11.2f} {r['grad_numba_s'] / r['dgbsv_s']:>11.2f} "
+              f"{r['ldlt_solve_s']:>10.2e} {r['ldlt_over_dgbsv']:>11.2f}{'' if r['ldlt_accepted'] else ' (refused)'}")
+    print("(ldlt: der's band_solve, LDL^T of the symmetric band refined against the band with its frame-transport "
+          "term and accepted on its backward error; dgbsv: LAPACK's banded LU with partial pivoting)")
     print("(grad: der's order-1 pass, the assembly's sums without the band; grad_sep: the separate stretching, "
           "bending and twisting passes it replaced)")
     if exps:

@@ -113,6 +113,7 @@ def dgbsv_seconds(scene, state, start=None, repeat=3):
     floor of the residual at ``state`` (``residual_floor``: eps |K| |q| against the force scale), and in the
     dict the CPU seconds of the same dgbsv (``dgbsv_cpu_s``, process time, best of ``repeat``)."""
     import der
+    from der import linalg
     from der.linalg import add_diagonal, band_solve, constrain_band
     from der.solvers.system import (
         build_system, evaluate_system, load_scales, prepare_state, residual_floor, residual_vector,
@@ -136,8 +137,12 @@ def dgbsv_seconds(scene, state, start=None, repeat=3):
         add_diagonal(ab, kl, ku, perm, diag, 1e-3)
         constrain_band(ab, kl, ku, perm, system.fixed, 1.0)
         R = residual_vector(system)
-        t0, c0 = time.perf_counter(), time.process_time()
-        band_solve(ab, kl, ku, perm, R)
+        linalg.USE_LDLT = False       # LAPACK's dgbsv itself, not der's symmetric path
+        try:
+            t0, c0 = time.perf_counter(), time.process_time()
+            band_solve(ab, kl, ku, perm, R)
+        finally:
+            linalg.USE_LDLT = True
         best = min(best, time.perf_counter() - t0)
         best_cpu = min(best_cpu, time.process_time() - c0)
     noise["dgbsv_cpu_s"] = best_cpu
@@ -155,12 +160,15 @@ def single(problem, n, time_budget=120.0, trace=True):
     t0 = time.perf_counter()
     scene, state, error = _problem(problem, n)
     setup_s = time.perf_counter() - t0
+    from der.linalg import BAND_SOLVES
+    BAND_SOLVES.update({k: 0 for k in BAND_SOLVES})    # count this solve's only (not the warm-up's)
     cpu0 = resource.getrusage(resource.RUSAGE_SELF)
     with _loop_cpu_time() as loop_cpu:
         res = der.solve(scene, state=state, stability=False, raise_on_failure=False,
                         options=der.SolverOptions(time_budget=time_budget, tol=TOL))
     cpu1 = resource.getrusage(resource.RUSAGE_SELF)
     peak_rss = cpu1.ru_maxrss
+    band_solves = dict(BAND_SOLVES)   # the solve's band solves by path (symmetric LDL^T accepted, or dgbsv)
     s_per_iteration = res.wall_time / max(res.iterations, 1)
     start = state if state is not None else scene.rod.rest_state()
     t_dgbsv, floor, noise = dgbsv_seconds(scene, res.state, start)
@@ -177,7 +185,7 @@ def single(problem, n, time_budget=120.0, trace=True):
            "residual": res.residual,
            "residual_floor": floor, **noise, "message": res.message, "error": error(res.state),
            "rss_growth_mb": (peak_rss - base_rss) / 1024.0, "peak_rss_mb": peak_rss / 1024.0,
-           "rss_per_edge_kb": (peak_rss - base_rss) / n, "compile_s": compile_s,
+           "rss_per_edge_kb": (peak_rss - base_rss) / n, "compile_s": compile_s, "band_solves": band_solves,
            **{f"{k}_s": v for k, v in res.timings.items()}}
     if not trace:
         return out
@@ -272,7 +280,7 @@ def main(argv=None):
                     help="only re-plot --png from the saved output of --json (no solve)")
     ap.add_argument("--no-trace", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--time-budget", type=float, default=120.0,
-                    help="wall-clock seconds per solve (default 120; a loaded machine may need more)")
+                    help="wall-clock budget of each solve in seconds (default 120; a loaded machine may need more)")
     args = ap.parse_args(argv)
     if args.png:
         from der.plotting import require_matplotlib
@@ -342,8 +350,8 @@ def main(argv=None):
 
 def million(args):
     """The 10^6-edge helix (stretched and overwound between clamps) in a fresh process."""
-    out = subprocess.run([sys.executable, __file__, "--single", "helix_winding", "1000000", "--no-trace"],
-                         capture_output=True, text=True)
+    out = subprocess.run([sys.executable, __file__, "--single", "helix_winding", "1000000", "--no-trace",
+                          "--time-budget", str(args.time_budget)], capture_output=True, text=True)
     try:
         r = json.loads(out.stdout.strip().splitlines()[-1])
     except (ValueError, IndexError):

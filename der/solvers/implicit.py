@@ -231,7 +231,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 if coo:
                     delta, info = _contact_solve(system, work, coo, R)
                 else:
-                    delta, info = band_solve(work, kl, ku, perm, R)
+                    delta, info = band_solve(work, kl, ku, perm, R, ldlt=getattr(system, "ldlt", None))
                     system.linear_solves["band"] += 1
                 expand(system, delta)
                 timings["factorisation"] += time.perf_counter() - t_phase

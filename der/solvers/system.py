@@ -25,7 +25,7 @@ from ..constraints import NO_LINKS, apply_targets, build_links, enforce_links, r
 from ..diagnostics import _edge_forces
 from ..energies.stretch import elongations
 from ..geometry import edge_array, edge_frames, transport_frames
-from ..linalg import band_layout, band_matvec, condense_band, condense_vector, constrain_band, dot, expand_step, new_band
+from ..linalg import BandLDLT, band_layout, band_matvec, condense_band, condense_vector, constrain_band, dot, expand_step, new_band
 from ..loads import DistributedForce, EndForce, EndTorque, FollowerForce, PointForce, PointTorque, TwistingMoment
 from ..scene import COUNTER_NAMES, edge_forces_in_pass, evaluate, make_plan
 
@@ -190,6 +190,9 @@ def build_system(scene, options):
     system.terms = tuple(term.bind(system) for term in scene.contacts)
     system.contact_coo = []
     system.linear_solves = {"band": 0, "sparse": 0}
+    # the symmetric band factorisation's work arrays, reused by every band_solve of this system; after a solve
+    # they hold the LDL^T factors and the inertia of the last matrix factorised (``linalg.BandLDLT``)
+    system.ldlt = BandLDLT(n, kl) if kl == ku else None
     return system
 
 
@@ -445,7 +448,7 @@ def newton_steps(system, state, rhs):
             return None
         delta = np.column_stack([x for x, _ in cols])
     else:
-        delta, info = band_solve(ab, system.kl, system.ku, system.perm, rhs)
+        delta, info = band_solve(ab, system.kl, system.ku, system.perm, rhs, ldlt=getattr(system, "ldlt", None))
         if info != 0:
             return None
     if not np.all(np.isfinite(delta)):

@@ -1,0 +1,135 @@
+"""band_solve's symmetric path (issue 17): LDL^T without pivoting of the band's symmetric lower triangle, refined
+against the band and accepted only on a small componentwise backward error, else LAPACK's dgbsv -- checked
+against dense solves, eigenvalue counts and the cases that must fall back."""
+import numpy as np
+import pytest
+
+from der import linalg
+from der.linalg import BAND_SOLVES, BandLDLT, band_ldlt_compact, band_solve, new_band
+
+
+def dense_to_band(A, kl, ku):
+    n = A.shape[0]
+    ab = new_band(n, kl, ku)
+    off = kl + ku
+    for j in range(n):
+        for i in range(max(0, j - ku), min(n - 1, j + kl) + 1):
+            ab[off + i - j, j] = A[i, j]
+    return ab
+
+
+def random_band(n, b, rng, shift):
+    A = np.zeros((n, n))
+    for s in range(1, b + 1):
+        v = rng.standard_normal(n - s)
+        A += np.diag(v, -s) + np.diag(v, s)
+    return A + np.diag(shift + rng.standard_normal(n))
+
+
+def counts():
+    return dict(BAND_SOLVES)
+
+
+def delta(before):
+    return {k: BAND_SOLVES[k] - before[k] for k in BAND_SOLVES}
+
+
+@pytest.mark.parametrize("b", [10, 19])
+def test_symmetric_band_is_solved_by_ldlt_and_matches_dense(b):
+    rng = np.random.default_rng(1)
+    n = 120
+    A = random_band(n, b, rng, 3.0 * b)            # diagonally dominant: positive definite
+    perm = rng.permutation(n)                     # DOF -> band position
+    Ad = A[np.ix_(perm, perm)]                    # A in DOF order: Ad[d, e] = A[perm[d], perm[e]]
+    rhs = rng.standard_normal((n, 3))
+    work = BandLDLT(n, b)
+    c0 = counts()
+    x, info = band_solve(dense_to_band(A, b, b), b, b, perm, rhs, ldlt=work)
+    assert info == 0 and delta(c0) == {"ldlt": 1, "dgbsv": 0, "ldlt_refused": 0}
+    assert work.accepted and work.backward_error <= linalg.LDLT_BACKWARD_ERROR
+    assert np.allclose(x, np.linalg.solve(Ad, rhs), rtol=1e-12, atol=1e-12)
+    assert work.negatives == 0
+
+
+def test_inertia_counts_negative_eigenvalues_of_an_indefinite_band():
+    rng = np.random.default_rng(2)
+    n, b = 80, 10
+    A = random_band(n, b, rng, 0.0)
+    A += np.diag(np.linspace(-40.0, 40.0, n))     # indefinite, pivots far from zero
+    L, D = np.empty((n, b)), np.empty(n)
+    neg = band_ldlt_compact(dense_to_band(A, b, b), b, b, L, D)
+    lower = np.zeros((n, n))
+    for j in range(n):
+        for s in range(1, b + 1):
+            if j + s < n:
+                lower[j + s, j] = L[j, s - 1]
+    Lf = lower + np.eye(n)
+    assert np.allclose(Lf @ np.diag(D) @ Lf.T, A, atol=1e-9 * np.abs(A).max())
+    assert neg == int((np.linalg.eigvalsh(A) < 0).sum())
+
+
+def test_small_skew_part_is_refined_to_the_nonsymmetric_solution():
+    rng = np.random.default_rng(3)
+    n, b = 100, 10
+    A = random_band(n, b, rng, 3.0 * b)
+    W = np.zeros((n, n))
+    for s in range(1, 4):
+        v = 1e-3 * rng.standard_normal(n - s)
+        W += np.diag(v, s) - np.diag(v, -s)
+    A = A + W                                      # a small skew part, like the frame-transport term
+    rhs = rng.standard_normal(n)
+    work = BandLDLT(n, b)
+    c0 = counts()
+    x, info = band_solve(dense_to_band(A, b, b), b, b, np.arange(n), rhs, ldlt=work)
+    assert delta(c0)["ldlt"] == 1
+    x_ref = np.linalg.solve(A, rhs)
+    assert np.abs(x - x_ref).max() <= 1e-11 * np.abs(x_ref).max()
+
+
+def test_zero_pivot_and_large_skew_fall_back_to_dgbsv():
+    rng = np.random.default_rng(4)
+    n, b = 60, 10
+    # a symmetric matrix with a zero leading pivot (non-singular): LDL^T without pivoting cannot start
+    A = random_band(n, b, rng, 3.0 * b)
+    A[0, 0] = 0.0
+    rhs = rng.standard_normal(n)
+    work = BandLDLT(n, b)
+    c0 = counts()
+    x, info = band_solve(dense_to_band(A, b, b), b, b, np.arange(n), rhs, ldlt=work)
+    assert delta(c0) == {"ldlt": 0, "dgbsv": 1, "ldlt_refused": 1} and not work.accepted
+    assert np.allclose(A @ x, rhs, atol=1e-10)
+    # a skew part as large as the symmetric one: refinement does not contract, the solve goes to dgbsv
+    B = random_band(n, b, rng, 1.0)
+    for s in range(1, b + 1):
+        v = 3.0 * rng.standard_normal(n - s)
+        B += np.diag(v, s) - np.diag(v, -s)
+    work = BandLDLT(n, b)
+    c0 = counts()
+    x, info = band_solve(dense_to_band(B, b, b), b, b, np.arange(n), rhs, ldlt=work)
+    assert delta(c0)["dgbsv"] == 1 and delta(c0)["ldlt"] == 0
+    assert np.allclose(B @ x, rhs, atol=1e-9 * np.abs(B).max() * np.abs(x).max())
+    # the next solves with the same work arrays go straight to dgbsv, then LDL^T is tried again
+    assert work.skip == linalg.LDLT_RETRY_AFTER
+    C = dense_to_band(random_band(n, b, rng, 3.0 * b), b, b)
+    c0 = counts()
+    for _ in range(linalg.LDLT_RETRY_AFTER + 1):
+        band_solve(C.copy(order="F"), b, b, np.arange(n), rhs, ldlt=work)
+    assert delta(c0) == {"ldlt": 1, "dgbsv": linalg.LDLT_RETRY_AFTER, "ldlt_refused": 0}
+
+
+def test_newton_solve_of_a_rod_uses_ldlt_and_keeps_its_inertia():
+    """A clamped helix (symmetric Newton matrix up to the frame-transport term): the implicit solver's band
+    solves are accepted LDL^T ones, and system.ldlt holds the last factorisation."""
+    import der
+    from der.solvers.system import build_system, evaluate_system, newton_steps, prepare_state, residual_vector
+
+    rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, 1.0, 60), 0.67, 1.0)
+    scene = der.Scene(rod, constraints=[der.clamp("start"), der.clamp("end")])
+    system = build_system(scene, der.SolverOptions())
+    state = prepare_state(system, rod.rest_state())
+    evaluate_system(system, state, 2)
+    c0 = counts()
+    step = newton_steps(system, state, residual_vector(system))
+    assert step is not None
+    assert BAND_SOLVES["ldlt"] - c0["ldlt"] == 1
+    assert system.ldlt.accepted and system.ldlt.negatives == 0     # the rest state is stable

@@ -928,7 +928,7 @@ def _follow(problem, state, p, t_prev, settings, parameter, first=None, first_re
                     break
                 continue
             new_state, new_p, residual, iterations = out
-            if natural and dp is None and abs(new_p - p) < 0.1 * settings["ds_min"] * problem.p_scale:
+            if natural and dp is None and not landing and abs(new_p - p) < 0.1 * settings["ds_min"] * problem.p_scale:
                 # the secant has turned across p (a fold): its steps converge but no longer advance p
                 status, message = "step_too_small", (
                     f"{parameter} advanced only {abs(new_p - p):.3g} from {p:.8g}, less than a tenth of the smallest "

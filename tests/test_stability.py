@@ -96,6 +96,20 @@ def test_cantilever_lowest_eigenvalue_in_edge_coordinates_at_n3000():
     assert 8.5 < errors[0] / errors[1] < 9.5
 
 
+def test_follower_loads_keep_the_node_coordinate_path():
+    """A follower load's stiffness changes the net force (t^T K != 0), which the edge path's reading of K_e off
+    the band assumes away; on a fine mesh that stiffness (f h^3 / A1) can slip under the symmetry and band checks.
+    A cantilever held at its start under a follower force or a follower end torque is analysed in node coordinates
+    (review of this round's edge path)."""
+    rod = der.rod_from_shape(der.shapes.straight(1.0, 200), 1.0, 1.0)
+    for load in (der.follower_force([0.0, 0.0, -1e-3]), der.end_torque([0.0, 0.0, 1e-3], follower=True)):
+        scene = der.Scene(rod, loads=[load], constraints=[der.clamp("start")])
+        res = der.check_stability(scene, rod.rest_state())
+        assert res.stability_method not in (None, "edge shift-invert"), res.stability_method
+    scene = der.Scene(rod, loads=[der.end_force([0.0, 0.0, -1e-3])], constraints=[der.clamp("start")])
+    assert der.check_stability(scene, rod.rest_state()).stability_method == "edge shift-invert"
+
+
 def test_edge_coordinates_stiffness_and_mass():
     """K_e read off the assembled band equals T^T K T (dense, n = 30) and M_e = T^T M T as applied by cumulative
     sums; a hinge at the start becomes a link between x_0 and the first edge."""

@@ -587,12 +587,17 @@ def _edge_apply(w, L, D, massive, root, fixed, tri_dep, tri_master, tri_coef, n_
 
 
 def _edge_eligible(system):
-    """Whether the edge-coordinate path applies: one open rod without contact, held at its start (a clamp, hinge
-    or roller at the start, or a pin on node 0), nothing else holding a node (fix_theta anywhere)."""
+    """Whether the edge-coordinate path applies: one open rod without contact or follower loads, held at its start
+    (a clamp, hinge or roller at the start, or a pin on node 0), nothing else holding a node (fix_theta anywhere)."""
     rod = system.rod
     if rod.closed or system.parts is not None or getattr(system, "terms", ()) or getattr(system, "contact_coo", None):
         return False
     if system.kl != 10 or system.ku != 10:
+        return False
+    plan = system.plan
+    if plan.has_follower or plan.has_follower_torques:
+        # a follower load's stiffness changes the net force (t^T K != 0), which reading K_e off the band assumes
+        # away; on a fine mesh it can pass the symmetry and band checks (f h^3 / A1 below their thresholds)
         return False
     held = False
     for c in system.scene.constraints:
@@ -773,6 +778,11 @@ class _BandOperator:
     def _mul_numba(self, x, absolute):
         if self.transposed:
             return self._mul(x, absolute)
+        x = np.asarray(x)
+        if np.iscomplexobj(x):        # eigenvectors of a non-symmetric pencil: the real and imaginary parts apart
+            if absolute:
+                return self._mul_numba(np.abs(x), True)
+            return self._mul_numba(x.real, False) + 1j * self._mul_numba(x.imag, False)
         x = np.asarray(x, dtype=float)
         cols = x.reshape(x.shape[0], -1)
         out = np.empty_like(cols)

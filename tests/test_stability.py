@@ -99,15 +99,17 @@ def test_cantilever_lowest_eigenvalue_in_edge_coordinates_at_n3000():
 def test_follower_loads_keep_the_node_coordinate_path():
     """A follower load's stiffness changes the net force (t^T K != 0), which the edge path's reading of K_e off
     the band assumes away; on a fine mesh that stiffness (f h^3 / A1) can slip under the symmetry and band checks.
-    A cantilever held at its start under a follower force or a follower end torque is analysed in node coordinates
-    (review of this round's edge path)."""
+    A cantilever held at its start under a follower force or a follower torque vector is analysed in node
+    coordinates (review of this round's edge path); a dead end force or a follower end torque (a moment on the end
+    edge's angle: no force, no stiffness on positions) keeps the edge path."""
     rod = der.rod_from_shape(der.shapes.straight(1.0, 200), 1.0, 1.0)
-    for load in (der.follower_force([0.0, 0.0, -1e-3]), der.end_torque([0.0, 0.0, 1e-3], follower=True)):
+    for load in (der.follower_force([0.0, 0.0, -1e-3]), der.point_torque(-1, [1e-3, 0.0, 0.0], follower=True)):
         scene = der.Scene(rod, loads=[load], constraints=[der.clamp("start")])
         res = der.check_stability(scene, rod.rest_state())
         assert res.stability_method not in (None, "edge shift-invert"), res.stability_method
-    scene = der.Scene(rod, loads=[der.end_force([0.0, 0.0, -1e-3])], constraints=[der.clamp("start")])
-    assert der.check_stability(scene, rod.rest_state()).stability_method == "edge shift-invert"
+    for load in (der.end_force([0.0, 0.0, -1e-3]), der.end_torque(1e-3, follower=True)):
+        scene = der.Scene(rod, loads=[load], constraints=[der.clamp("start")])
+        assert der.check_stability(scene, rod.rest_state()).stability_method == "edge shift-invert"
 
 
 def test_edge_coordinates_stiffness_and_mass():

@@ -493,13 +493,11 @@ def band_ldlt_solve(L, D, perm, rhs):
     return _band_ldlt_solve(L, D, perm, np.ascontiguousarray(rhs))
 
 
-@njit(cache=True)
-def _band_ldlt_solve1(L, D, perm, rhs):
+@njit(cache=True, inline="always")
+def band_ldlt_solve_inplace(L, D, y):
+    """y <- (L D L^T)^-1 y in place, with the factors of ``band_ldlt`` in their own (band) order."""
     n, b1 = L.shape
     b = b1 - 1
-    y = np.empty(n)
-    for d in range(n):
-        y[perm[d]] = rhs[d]
     for k in range(n):                       # L y = rhs
         acc = y[k]
         for s in range(1, min(b, k) + 1):
@@ -512,6 +510,15 @@ def _band_ldlt_solve1(L, D, perm, rhs):
         for s in range(1, min(b, n - 1 - k) + 1):
             acc -= L[k + s, s] * y[k + s]
         y[k] = acc
+
+
+@njit(cache=True)
+def _band_ldlt_solve1(L, D, perm, rhs):
+    n = L.shape[0]
+    y = np.empty(n)
+    for d in range(n):
+        y[perm[d]] = rhs[d]
+    band_ldlt_solve_inplace(L, D, y)
     out = np.empty(n)
     for d in range(n):
         out[d] = y[perm[d]]

@@ -86,8 +86,8 @@ import numpy as np
 from numba import njit
 
 from ..constraints import END_SUPPORTS, FixTheta, Pin
-from ..linalg import (BandLU, add_diagonal, band_ldlt, band_ldlt_solve, band_matvec, band_negative_pivots,
-                      band_to_sparse, condense_band, dot, dot_abs,
+from ..linalg import (BandLU, add_diagonal, band_ldlt, band_ldlt_solve, band_ldlt_solve_inplace, band_matvec,
+                      band_negative_pivots, band_to_sparse, condense_band, dot, dot_abs,
                       constrain_band)
 from ..loads import DistributedForce, EndForce, EndTorque, PointForce, TwistingMoment
 from .system import condense_forces, condense_system_band, evaluate_system, rotational_inertia
@@ -551,19 +551,7 @@ def _edge_rt_solve(w, L, D, massive, root, fixed, tri_dep, tri_master, tri_coef,
         if fixed[i]:
             f[i] = 0.0
     z = f
-    b = L.shape[1] - 1                         # L D L^T z = f in place (band_ldlt's factors, identity order)
-    for k in range(n):
-        acc = z[k]
-        for s in range(1, min(b, k) + 1):
-            acc -= L[k, s] * z[k - s]
-        z[k] = acc
-    for k in range(n):
-        z[k] /= D[k]
-    for k in range(n - 1, -1, -1):
-        acc = z[k]
-        for s in range(1, min(b, n - 1 - k) + 1):
-            acc -= L[k + s, s] * z[k + s]
-        z[k] = acc
+    band_ldlt_solve_inplace(L, D, z)           # L D L^T z = f in place (band_ldlt's factors, identity order)
     for k in range(tri_dep.shape[0]):
         z[tri_dep[k]] = 0.0
     for k in range(tri_dep.shape[0]):

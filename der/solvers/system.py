@@ -633,15 +633,16 @@ def support_reactions(system, state):
     return out
 
 
-def state_edges(system, state):
-    """The edge vectors of ``state`` (n_edges, 3), from its compensated positions (``geometry.edge_array``)."""
-    return edge_array(state.q, system.rod.edge_nodes, state.q_lo)
+def state_edges(system, state, lo=False):
+    """The edge vectors of ``state`` (n_edges, 3), from its compensated positions (``geometry.edge_array``); with
+    ``lo`` (n_edges, 6), the edges' exact low parts in columns 3-5."""
+    return edge_array(state.q, system.rod.edge_nodes, state.q_lo, lo)
 
 
 def state_elongations(system, state):
     """g_j = |e_j| - l_j of ``state``'s edges (compensated positions)."""
     rod = system.rod
-    return elongations(state.q, rod.edge_nodes, rod.l_bar, edge_array(state.q, rod.edge_nodes, state.q_lo, True))
+    return elongations(state.q, rod.edge_nodes, rod.l_bar, state_edges(system, state, lo=True))
 
 
 def max_strain(system, state):
@@ -813,9 +814,9 @@ def energy_terms(system, state):
     out = {}
     if plan.has_stretch:
         out["stretch"] = float(stretch_energy(state.q, rod.edge_nodes, rod.l_bar, plan.k_stretch, state.lam,
-                                              edge_array(state.q, rod.edge_nodes, state.q_lo, True)))
+                                              state_edges(system, state, lo=True)))
     if plan.has_bend:
-        ed = edge_frames(state.q, rod.edge_nodes, state.d1, edge_array(state.q, rod.edge_nodes, state.q_lo, True))
+        ed = edge_frames(state.q, rod.edge_nodes, state.d1, state_edges(system, state, lo=True))
         out["bend"] = float(bend_energy(ed, rod.vertex_edges, plan.weld, plan.kappa_bar, rod.voronoi, plan.A1))
     if plan.has_twist:
         out["twist"] = float(twist_energy(state.q, rod.vertex_edges, state.reference_twist, plan.weld, rod.twist_bar,

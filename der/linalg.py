@@ -188,8 +188,8 @@ USE_LDLT = True
 
 class BandLDLT:
     """Work arrays of the symmetric band factorisation ``band_ldlt_compact`` for matrices of ``n`` rows and
-    half-bandwidth ``b`` (allocated by the first solve that uses them), reused from solve to solve (``band_solve(..., ldlt=...)``: no allocation, and no first
-    touch of fresh pages, per Newton iteration). After a solve that used it: ``L``, ``D`` the factors of the
+    half-bandwidth ``b`` (allocated by the first solve that uses them), reused from solve to solve
+    (``band_solve(..., ldlt=...)``: no allocation, and no first touch of fresh pages, per Newton iteration). After a solve that used it: ``L``, ``D`` the factors of the
     symmetric part of the last matrix factorised (in band order) and ``negatives`` its number of negative
     pivots (= negative eigenvalues, Sylvester's law of inertia), ``accepted`` whether its solution passed the
     backward-error test (else the solve went to dgbsv), ``backward_error`` the error reached."""

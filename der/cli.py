@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import solvers as _solvers
+from .solvers.system import raise_if_interrupted
 from .warmup import warmup
 
 EXIT_OK, EXIT_INVALID, EXIT_FAILED = 0, 2, 3
@@ -124,7 +125,7 @@ class SolveRunner:
                                 raise_on_failure=False, **options)
         self.offset += result.iterations + 1
         self.results.append(result)
-        return result
+        return raise_if_interrupted(result)      # Ctrl-C ends the scenario, not just this solve
 
     @property
     def runtime(self):
@@ -300,14 +301,22 @@ def scenario_main(name, description, parameters, run, n_default=100, n_min=2, ar
     if resolve is not None:
         resolve(args)
     params = {p[0]: getattr(args, p[0].replace("-", "_")) for p in parameters}
-    compile_s = warmup()
+    interrupted, t_compile = False, time.perf_counter()
+    try:
+        compile_s = warmup()
+    except KeyboardInterrupt:          # Ctrl-C while the kernels compile: no solve has run
+        compile_s, interrupted = time.perf_counter() - t_compile, True
     runner = SolveRunner(args)
     t0 = time.perf_counter()
     failure = None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
         try:
-            out = run(args, runner)
+            out = {} if interrupted else run(args, runner)
+        except KeyboardInterrupt:
+            # a solve that was interrupted kept its state and closed its recording (SolveRunner passes the
+            # Ctrl-C on, so that no further solve starts); a Ctrl-C between solves lands here directly
+            out, interrupted = {}, True
         except ValueError as exc:
             print(f"{name}.py: invalid input: {_one_line(exc)}", file=sys.stderr)
             return EXIT_INVALID
@@ -328,6 +337,7 @@ def scenario_main(name, description, parameters, run, n_default=100, n_min=2, ar
     wall = time.perf_counter() - t0
     main = runner.results[-1] if runner.results else None
     converged = bool(out.pop("converged", bool(runner.results) and all(r.converged for r in runner.results)))
+    converged = converged and not interrupted
     check_failed = out.pop("check_failed", None)
     if numeric:
         kinds = sorted({_one_line(w.message) for w in numeric})
@@ -345,7 +355,7 @@ def scenario_main(name, description, parameters, run, n_default=100, n_min=2, ar
         "solver": args.solver,
         "tol": args.tol,
         "converged": converged,
-        "status": main.status if main else "no solve",
+        "status": "interrupted" if interrupted else (main.status if main else "no solve"),
         "statuses": statuses,
         "message": main.message if main else "",
         "residual": max((r.residual for r in runner.results), default=None),
@@ -363,7 +373,8 @@ def scenario_main(name, description, parameters, run, n_default=100, n_min=2, ar
         record["check_failed"] = check_failed
     record.update(out)
     if args.rrd:
-        record["rrd"] = os.path.abspath(args.rrd)
+        # (None: interrupted before the first solve opened it)
+        record["rrd"] = os.path.abspath(args.rrd) if runner.recorder is not None else None
     record = _jsonable(record)
     if args.json:
         print(json.dumps(record))
@@ -372,6 +383,10 @@ def scenario_main(name, description, parameters, run, n_default=100, n_min=2, ar
     if not converged:
         bad = next((r for r in runner.results if not r.converged), main)
         reason = f"not converged: {bad.status}: {bad.message}" if bad else "not converged: no solve ran"
+        if interrupted and (bad is None or bad.status != "interrupted"):
+            reason = ("interrupted by the user " + ("before the first solve (while der's kernels compiled); no "
+                                                    "recording written" if main is None else
+                                                    f"between solves; {len(runner.results)} solve(s) ran"))
         if args.solver == "explicit" and bad is not None and bad.status in ("max_iterations", "time_budget"):
             reason += "; the explicit solver is slow on long or stiff rods: try --solver implicit"
         print(f"{name}.py: {_one_line(reason)}", file=sys.stderr)

@@ -1036,8 +1036,9 @@ def _step(problem, settings, state, p, t, x_pred, natural, landing, branch):
 
 def _der_solve(scene, **kwargs):
     from .solvers import solve
+    from .solvers.system import raise_if_interrupted
 
-    return solve(scene, raise_on_failure=False, **kwargs)
+    return raise_if_interrupted(solve(scene, raise_on_failure=False, **kwargs))   # Ctrl-C ends the continuation
 
 
 def _tangent_of(problem, new_state, new_p, state, p, t, natural, predictor="secant"):

@@ -99,7 +99,12 @@ def _run_kernels():
     from . import clamp, distributed_force, end_force, end_torque, point_force, rod_from_shape, shapes, twisting_moment
     from . import diagnostics as dg
     from .scene import Scene
-    from .solvers import solve
+    from .solvers import solve as der_solve
+    from .solvers.system import raise_if_interrupted
+
+    def solve(*args, **kwargs):          # a Ctrl-C during the warm-up stops the process's first solve too
+        return raise_if_interrupted(der_solve(*args, **kwargs))
+
     rod = rod_from_shape(shapes.helix(1.0, 0.5, 0.5, 6), 1.0, 1.5)
     loads = [point_force(-1, [0, 0, 1e-3]), end_force([1e-3, 0, 0]), distributed_force([0, 1e-4, 0]),
              end_torque([0, 0, 1e-3]), end_torque(1e-3, follower=True), twisting_moment(1e-4)]

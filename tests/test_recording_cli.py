@@ -92,6 +92,71 @@ def test_keyboard_interrupt_keeps_the_state_and_a_valid_recording(tmp_path, monk
     assert ok, msg
 
 
+def test_ctrl_c_during_the_warmup_reaches_the_caller(monkeypatch):
+    # The first solve of a process compiles der's kernels by running small solves (der.warmup); each of them
+    # answers Ctrl-C with an "interrupted" result, which the warm-up took for a finished solve: a Ctrl-C while a
+    # fresh clone compiled (a minute or more) was lost and the user's solve then ran to its end.
+    warmup_module = sys.modules["der.warmup"]     # (der.warmup is the function)
+
+    def interrupted(system, state, order):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(warmup_module, "_DONE", False)
+    monkeypatch.setattr(implicit_module, "evaluate_system", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        der.warmup()
+    assert not warmup_module.is_done()       # the next solve warms up again
+
+
+def test_a_scenario_stops_at_the_first_interrupted_solve(monkeypatch, capsys, tmp_path):
+    # Ctrl-C in one solve of a scenario (here the first of several) ends the scenario: exit 3, status
+    # "interrupted", the recording valid; no further solve starts
+    from der.cli import scenario_main
+
+    def run(p, solver):
+        for _ in range(3):
+            solver.solve(helix_scene())
+        return {"error": 0.0, "reference": "none"}
+
+    original = implicit_module.evaluate_system
+    calls = {"n": 0}
+
+    def interrupted(system, state, order):
+        calls["n"] += 1
+        if calls["n"] == 4:
+            raise KeyboardInterrupt
+        return original(system, state, order)
+
+    der.warmup()
+    monkeypatch.setattr(implicit_module, "evaluate_system", interrupted)
+    path = tmp_path / "several.rrd"
+    code = scenario_main("fake", "a fake scenario", [("x", 1.0, float, "x")], run,
+                         argv=["--n", "10", "--json", "--rrd", str(path)])
+    out, err = capsys.readouterr()
+    record = json.loads(out.strip().splitlines()[-1])
+    assert code == 3 and record["status"] == "interrupted" and record["iterations"] < 50, (record, err)
+    assert calls["n"] < 20                    # the two solves after the interrupted one did not run
+    ok, msg = verify(path)
+    assert ok, msg
+
+
+def test_ctrl_c_while_the_kernels_compile_exits_3_without_a_recording(monkeypatch, capsys, tmp_path):
+    import der.cli as cli
+
+    def compiling():
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "warmup", compiling)
+    path = tmp_path / "never.rrd"
+    code = cli.scenario_main("fake", "a fake scenario", [("x", 1.0, float, "x")],
+                             lambda p, solver: pytest.fail("no solve may start"),
+                             argv=["--n", "10", "--json", "--rrd", str(path)])
+    out, err = capsys.readouterr()
+    record = json.loads(out.strip().splitlines()[-1])
+    assert code == 3 and record["status"] == "interrupted" and record["rrd"] is None
+    assert len(err.strip().splitlines()) == 1 and "while der's kernels compiled" in err, err
+
+
 def run_scenario(*args, timeout=600):
     return subprocess.run([sys.executable, str(ROOT / "scenarios" / "straight_twist.py"), *args],
                           capture_output=True, text=True, timeout=timeout, env=ENV)
@@ -143,30 +208,25 @@ def test_scenario_not_converged_exits_3_with_json():
     assert record["converged"] is False and record["status"] == "max_iterations"
 
 
-@pytest.mark.xfail(strict=False, reason="open defect (issue 11 note): in a fresh clone the scenario's solve ends with exit 0 "
-                   "after SIGINT in 2 of 3 CI runs this round; passes in a warm checkout; cause not yet found")
 def test_ctrl_c_leaves_a_valid_recording(tmp_path):
     path = tmp_path / "sigint.rrd"
     proc = subprocess.Popen([sys.executable, str(ROOT / "scenarios" / "straight_twist.py"), "--solver", "explicit",
                              "--n", "3000", "--tol", "1e-12", "--rrd", str(path), "--json"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
-    # interrupt once the solver reports progress (a line per second on stderr), i.e. inside the solve
-    deadline = time.time() + 120
-    line = ""
-    while time.time() < deadline and "iteration" not in line:
-        line = proc.stderr.readline()
-        if not line and proc.poll() is not None:
+    # interrupt once the solver reports progress (a line per second on stderr), i.e. inside the solve. Not
+    # before: a Ctrl-C while a fresh clone compiles (der.warmup, minutes on a busy machine) ends the run before
+    # any recording exists (test_ctrl_c_while_the_kernels_compile_exits_3_without_a_recording); this test's old
+    # 120 s wait ran out there, and the warm-up swallowed the Ctrl-C (test_ctrl_c_during_the_warmup_reaches_the_caller)
+    deadline = time.time() + 900
+    lines = []
+    while time.time() < deadline and not (lines and "iteration" in lines[-1]):
+        lines.append(proc.stderr.readline())
+        if not lines[-1] and proc.poll() is not None:
             break
-    assert proc.poll() is None, "the solve ended before it could be interrupted"
+    assert proc.poll() is None and "iteration" in lines[-1], f"no progress line to interrupt: {lines[-5:]}"
     proc.send_signal(signal.SIGINT)
-    try:
-        stdout, _ = proc.communicate(timeout=15)
-    except subprocess.TimeoutExpired:
-        # once in ~6 fresh-clone runs the first SIGINT was not seen and the solve went on to converge (exit 0);
-        # cause not found yet (noted on issue 11): a second Ctrl-C, as a user would press, must still interrupt
-        proc.send_signal(signal.SIGINT)
-        stdout, _ = proc.communicate(timeout=120)
-    assert proc.returncode == 3
+    stdout, err = proc.communicate(timeout=120)
+    assert proc.returncode == 3, (proc.returncode, err)
     record = json.loads(stdout.strip().splitlines()[-1])
     assert record["status"] == "interrupted"
     ok, msg = verify(path)

@@ -332,12 +332,13 @@ def warmup():
     from ..scene import Scene
     from ..terms.contact import self_contact
     from . import solve
+    from .system import raise_if_interrupted
 
     _WARM.append(0.0)              # (the solve below calls this again)
     t0 = time.perf_counter()
     base = rod_from_shape(shapes.ring(1.0, 24), 1.0, 1.5)
     ring = base.with_natural(kappa_bar=base.kappa_bar * 0.0)
-    solve(Scene(ring, contacts=[self_contact(0.02)]), solver="explicit", max_steps=20, stability=False,
-          raise_on_failure=False)
+    raise_if_interrupted(solve(Scene(ring, contacts=[self_contact(0.02)]), solver="explicit", max_steps=20,
+                               stability=False, raise_on_failure=False))
     _WARM[0] = time.perf_counter() - t0
     return _WARM[0]

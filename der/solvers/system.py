@@ -564,6 +564,18 @@ def is_interrupt(exc):
     return False
 
 
+def raise_if_interrupted(result):
+    """Pass a Ctrl-C on from a solve that der itself started; returns ``result`` otherwise.
+
+    ``der.solve`` answers Ctrl-C with a result whose status is "interrupted" (the last state kept, the recording
+    closed); a caller inside der (the compilation warm-up, a continuation step, a scenario script's next solve)
+    must stop there too rather than take it for a step that merely failed and go on (the warm-up did: a Ctrl-C
+    during a first, compiling run was lost and the solve after it ran to the end)."""
+    if result.status == "interrupted":
+        raise KeyboardInterrupt
+    return result
+
+
 def final_result(system, state, status, **fields):
     """The SolveResult of a solve that ended in ``status`` at ``state``: the force-derived fields (load scale,
     residual per unit length, energy by term) are evaluated here, once, for both solvers."""

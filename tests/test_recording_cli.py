@@ -72,17 +72,26 @@ def test_recording_is_flushed_when_the_solve_raises(tmp_path, monkeypatch):
     assert ok, msg
 
 
-def test_keyboard_interrupt_keeps_the_state_and_a_valid_recording(tmp_path, monkeypatch):
+def interrupt_evaluation(monkeypatch, at):
+    """Make the implicit solver's ``at``-th force evaluation raise KeyboardInterrupt (a Ctrl-C inside a solve);
+    returns the call counter ``{"n": calls so far}``. The kernels are compiled first: a Ctrl-C in the warm-up's
+    own solves ends the warm-up (test_ctrl_c_during_the_warmup_reaches_the_caller), not the solve under test."""
+    der.warmup()
     original = implicit_module.evaluate_system
     calls = {"n": 0}
 
     def interrupted(system, state, order):
         calls["n"] += 1
-        if calls["n"] == 6:
+        if calls["n"] == at:
             raise KeyboardInterrupt
         return original(system, state, order)
 
     monkeypatch.setattr(implicit_module, "evaluate_system", interrupted)
+    return calls
+
+
+def test_keyboard_interrupt_keeps_the_state_and_a_valid_recording(tmp_path, monkeypatch):
+    interrupt_evaluation(monkeypatch, at=6)
     path = tmp_path / "ctrlc.rrd"
     with pytest.raises(der.ConvergenceError) as info:
         der.solve(helix_scene(), record=path)
@@ -118,17 +127,7 @@ def test_a_scenario_stops_at_the_first_interrupted_solve(monkeypatch, capsys, tm
             solver.solve(helix_scene())
         return {"error": 0.0, "reference": "none"}
 
-    original = implicit_module.evaluate_system
-    calls = {"n": 0}
-
-    def interrupted(system, state, order):
-        calls["n"] += 1
-        if calls["n"] == 4:
-            raise KeyboardInterrupt
-        return original(system, state, order)
-
-    der.warmup()
-    monkeypatch.setattr(implicit_module, "evaluate_system", interrupted)
+    calls = interrupt_evaluation(monkeypatch, at=4)
     path = tmp_path / "several.rrd"
     code = scenario_main("fake", "a fake scenario", [("x", 1.0, float, "x")], run,
                          argv=["--n", "10", "--json", "--rrd", str(path)])

@@ -205,7 +205,8 @@ class SolveResult:
         complex eigenvalues appear among the lowest (circulatory loads: the undamped rod would flutter).
     stability_time : seconds spent in the stability analysis (not part of ``wall_time``; 0 if not run), with the
         assembly of the Hessian at the final state (which the implicit solver does in its last force evaluation
-        when the analysis follows).
+        when the analysis follows). ``stability_cpu_time``: the same in CPU seconds of this process
+        (``time.process_time``; tools/stability_scaling.py compares it with the solve's).
     stability_method : the eigen-solver path that ran ("dense", "banded shift-invert" in node coordinates, "edge
         shift-invert" in edge coordinates: open rods held at their start; "" if not run). See der.solvers.stability.
     energy : energy by term at the final state.
@@ -266,6 +267,7 @@ class SolveResult:
     residual_floor: float = float("nan")
     residual_per_length: float = float("nan")
     stability_time: float = 0.0
+    stability_cpu_time: float = 0.0
     stability_method: str = ""
     compile_time: float = 0.0
     reactions: list = field(default_factory=list)

@@ -148,6 +148,34 @@ def _rigid_generators(rod, state):
     return G
 
 
+def _rigid_generator_rows(rod, state, rows):
+    """Rows ``rows`` of ``_rigid_generators`` and its column norms, without forming it: the norms from the second
+    moments of the nodes about their centroid and of the tangents (|e_a x r|^2 = r_b^2 + r_c^2), O(n) in 3 x 3
+    sums (a scene whose held DOFs leave no rigid motion never needs the whole (n_dof, 6) matrix)."""
+    x = state.positions
+    t = state.tangents
+    r = x - x.mean(axis=0)
+    S = r.T @ r
+    Tt = t.T @ t
+    col = np.empty(6)
+    col[:3] = np.sqrt(rod.n_nodes)
+    for a in range(3):
+        b, c = (a + 1) % 3, (a + 2) % 3
+        col[3 + a] = np.sqrt(S[b, b] + S[c, c] + Tt[a, a])
+    G = np.zeros((rows.size, 6))
+    for i, d in enumerate(rows):
+        node, slot = divmod(int(d), 4)
+        for a in range(3):
+            w = np.zeros(3)
+            w[a] = 1.0
+            if slot < 3:
+                G[i, slot] = 1.0
+                G[i, 3 + a] = np.cross(w, r[node])[slot]
+            elif node < rod.n_edges:
+                G[i, 3 + a] = t[node] @ w
+    return G, col
+
+
 def _null_space(A, rtol=1e-9):
     """Orthonormal basis of the null space of A (columns); A is built from unit-size rows."""
     if A.shape[0] == 0:
@@ -206,18 +234,18 @@ def symmetry_modes(system, state):
     free_th &= ~fixed
     modes = []
     # rigid motions: null space of (values on fixed DOFs, w x f for dead loads) in (u, w)
-    G = _rigid_generators(rod, state)
-    col = np.linalg.norm(G, axis=0)
-    G = G / col[None, :]
-    rows = [G[fixed]]
+    Gf, col = _rigid_generator_rows(rod, state, np.flatnonzero(fixed))
+    rows = [Gf / col[None, :]]
     for d in _dead_directions(scene):
         # w x d = 0, i.e. [d]x w = 0, on the rotation coefficients (columns rescaled like G's)
         cross = np.array([[0, -d[2], d[1]], [d[2], 0, -d[0]], [-d[1], d[0], 0]])
         r = np.hstack([np.zeros((3, 3)), cross / col[None, 3:]])
         rows.append(r / max(np.abs(r).max(), 1e-300))
     N = _null_space(np.vstack(rows))
-    for k in range(N.shape[1]):
-        modes.append(G @ N[:, k])
+    if N.shape[1]:
+        G = _rigid_generators(rod, state) / col[None, :]
+        for k in range(N.shape[1]):
+            modes.append(G @ N[:, k])
     energies = set(scene.energies)
     straight = np.abs(rod.kappa_bar).max(initial=0.0) <= 1e-12
     if "twist" not in energies and ("bend" not in energies or straight):
@@ -329,11 +357,7 @@ def lowest_modes(system, state, n_eigenvalues=6, dense_max=DENSE_MAX_DOFS, edge=
         ev, vec = _dense_lowest(K, m, V, symmetric, k)
         out["method"] = "dense"
     elif ez is not None and symmetric and V.shape[1] == 0:
-        abz = abz_raw
-        if ez.tri_dep.size:
-            abz = abz_raw.copy(order="F")
-            condense_band(abz, EDGE_BAND, EDGE_BAND, ez.perm, ez.tri_dep, ez.tri_master, ez.tri_coef)
-        edge = _edge_eigen(ez, abz, k)
+        edge = _edge_eigen(ez, abz_raw, k)
     if edge is not None:
         return _edge_out(system, ez, abz_raw, edge, idx, mass, k, out)
     if out["method"] != "dense":
@@ -513,10 +537,17 @@ def _edge_block_lanczos(ez, L, D, k, tol=EDGE_LANCZOS_TOL, block=EDGE_LANCZOS_BL
         m1 = m + block
         _edge_apply_block(Q[m:m1], W, Zs[m:m1], scratch, *args)
         passes += 1
+        # Gram-Schmidt twice: first against the last two blocks, where the cancellation is (exactly, C q_j lies in
+        # the span of q_{j-1}, q_j, q_{j+1}: the three-term recurrence), then against the whole basis, which removes
+        # what rounding (eps |C q_j|) and the first pass put along every earlier vector -- the accuracy of two
+        # full passes of classical Gram-Schmidt for the price of one
+        lo = max(0, m - block)
+        Ql = Q[lo:m1]
+        h = np.zeros((m1, block))
+        h[lo:] = Ql @ W.T
+        W -= h[lo:].T @ Ql
         Qb = Q[:m1]
-        h = Qb @ W.T                     # (m1, b)
-        W -= h.T @ Qb
-        h2 = Qb @ W.T                    # the second pass of classical Gram-Schmidt (full reorthogonalisation)
+        h2 = Qb @ W.T
         W -= h2.T @ Qb
         h += h2
         H[:m1, m:m1] = h
@@ -535,8 +566,9 @@ def _edge_block_lanczos(ez, L, D, k, tol=EDGE_LANCZOS_TOL, block=EDGE_LANCZOS_BL
     return None
 
 
-def _edge_eigen(ez, abz, k):
-    """The k eigenpairs nearest zero in edge coordinates: one banded LDL^T of K (``band_ldlt_compact``, no
+def _edge_eigen(ez, abz_raw, k):
+    """The k eigenpairs nearest zero in edge coordinates (K_e = ``abz_raw``, before the supports' links are
+    condensed): one banded LDL^T of K (``band_ldlt_compact``, no
     pivoting; its negative pivots count the negative eigenvalues, Sylvester), then block Lanczos on it
     (``_edge_block_lanczos``), ARPACK (``_edge_lowest``) if that does not converge within its basis. Returns
     (eigenvalues, list of full z, negatives, method detail) or None if the factorisation is refused.
@@ -549,7 +581,10 @@ def _edge_eigen(ez, abz, k):
     solve's backward error must be at round-off level, as before."""
     from ..linalg import BandLDLT
 
-    work = abz.copy(order="F")
+    # one copy of K_e (abz_raw is kept for the residuals): the supports' links condensed, held slots identity
+    work = abz_raw.copy(order="F")
+    if ez.tri_dep.size:
+        condense_band(work, EDGE_BAND, EDGE_BAND, ez.perm, ez.tri_dep, ez.tri_master, ez.tri_coef)
     constrain_band(work, EDGE_BAND, EDGE_BAND, ez.perm, ez.fixed, 1.0)
     f = BandLDLT(ez.n_dof, EDGE_BAND)
     f.ensure(ez.n_dof, EDGE_BAND)
@@ -574,7 +609,7 @@ def _edge_eigen(ez, abz, k):
     if got is not None:
         ev, z, passes = got
         return ev, z, int(neg), f"block Lanczos, {passes} passes of {EDGE_LANCZOS_BLOCK}"
-    old = _edge_lowest(ez, abz, k)
+    old = _edge_lowest(ez, work, k)
     return None if old is None else old + ("ARPACK",)
 
 
@@ -1007,13 +1042,15 @@ def stability(system, result, n_eigenvalues=6):
     """Fill ``result.min_eigenvalue``, ``result.eigenvalues``, ``result.stable``, ``result.flutter``,
     ``result.stability_note``, ``result.stability_method`` (``lowest_modes``' method) and ``result.stability_time``
     (seconds; not part of ``wall_time``)."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     state = result.state
     # the Hessian at the final state when the solver assembled it with its last force evaluation (its assembly
     # time counted here)
     assembly = take_hessian(system, state)
     out = lowest_modes(system, state, n_eigenvalues, assembled=assembly is not None)
-    t0 -= assembly or 0.0
+    if assembly is not None:
+        t0 -= assembly[0]
+        c0 -= assembly[1]
     result.stability_method = out["method"]
     ev = out["eigenvalues"]
     symmetric = out["symmetric"]
@@ -1025,6 +1062,7 @@ def stability(system, result, n_eigenvalues=6):
         result.flutter = False
         result.stability_note = "every DOF is fixed: nothing can move, trivially in equilibrium and stable"
         result.stability_time = time.perf_counter() - t0
+        result.stability_cpu_time = time.process_time() - c0
         return result
     if ev.size == 0:
         result.min_eigenvalue = np.inf
@@ -1034,6 +1072,7 @@ def stability(system, result, n_eigenvalues=6):
         result.stability_note = (f"every free DOF is a symmetry mode ({out['n_symmetry']} removed) or massless: "
                                  f"no finite eigenvalue, stable")
         result.stability_time = time.perf_counter() - t0
+        result.stability_cpu_time = time.process_time() - c0
         return result
     floor = float(out["floors"][0])
     lam_min = float(ev.real[0])
@@ -1091,4 +1130,5 @@ def stability(system, result, n_eigenvalues=6):
     result.flutter = complex_pairs
     result.stability_note = "; ".join(notes)
     result.stability_time = time.perf_counter() - t0
+    result.stability_cpu_time = time.process_time() - c0
     return result

@@ -593,9 +593,10 @@ def final_result(system, state, status, **fields):
     hessian = hessian and status in CONVERGED_STATUSES and not system.terms
     system.hessian_at = None
     if hessian:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         evaluate_system(system, state, 2)
-        system.hessian_at = (state, state.q.copy(), state.lam.copy(), time.perf_counter() - t0)
+        system.hessian_at = (state, state.q.copy(), state.lam.copy(), time.perf_counter() - t0,
+                             time.process_time() - c0)
     else:
         evaluate_system(system, state, 1)
     scales = load_scales(system, state)
@@ -610,15 +611,15 @@ def final_result(system, state, status, **fields):
 
 
 def take_hessian(system, state):
-    """The seconds its assembly took if ``system.ab`` holds the Hessian at ``state``, assembled by ``final_result``
-    and untouched since (same state object, same coordinates and multipliers), else None. Either way the band is
-    no longer marked as that Hessian (the caller condenses or factorises it)."""
+    """(wall, CPU) seconds its assembly took if ``system.ab`` holds the Hessian at ``state``, assembled by
+    ``final_result`` and untouched since (same state object, same coordinates and multipliers), else None. Either
+    way the band is no longer marked as that Hessian (the caller condenses or factorises it)."""
     tok = getattr(system, "hessian_at", None)
     system.hessian_at = None
     if tok is None or tok[0] is not state or not np.array_equal(tok[1], state.q) or not np.array_equal(
             tok[2], state.lam):
         return None
-    return tok[3]
+    return tok[3], tok[4]
 
 
 def support_reactions(system, state):

@@ -579,10 +579,23 @@ def _edge_eigen(ez, abz_raw, k):
     |L| |D| |L|^T = L D L^T + O(eps), whose entries are bounded by its diagonal, which is K's to first order), as
     small as LU with pivoting achieves. With a negative pivot the growth of the factors is not bounded, and a test
     solve's backward error must be at round-off level, as before."""
+    # the supports' links condensed and the held slots made identity in place, on K_e itself: they touch only the
+    # columns within the bandwidth of a held, dependent or master slot, which are saved here and restored below
+    # (abz_raw serves the residuals after this; a copy of the whole band costs its size in fresh pages)
+    touched = np.concatenate([np.flatnonzero(ez.fixed), ez.tri_dep, ez.tri_master])
+    cols = np.unique(np.clip((touched[:, None] + np.arange(-EDGE_BAND, EDGE_BAND + 1)[None, :]).ravel(), 0,
+                             ez.n_dof - 1))
+    saved = abz_raw[:, cols].copy()
+    try:
+        return _edge_eigen_factorised(ez, abz_raw, k)
+    finally:
+        abz_raw[:, cols] = saved
+
+
+def _edge_eigen_factorised(ez, work, k):
+    """``_edge_eigen`` on ``work`` (K_e, modified in place: links condensed, held slots identity)."""
     from ..linalg import BandLDLT
 
-    # one copy of K_e (abz_raw is kept for the residuals): the supports' links condensed, held slots identity
-    work = abz_raw.copy(order="F")
     if ez.tri_dep.size:
         condense_band(work, EDGE_BAND, EDGE_BAND, ez.perm, ez.tri_dep, ez.tri_master, ez.tri_coef)
     constrain_band(work, EDGE_BAND, EDGE_BAND, ez.perm, ez.fixed, 1.0)
@@ -650,51 +663,59 @@ def _edge_lowest(ez, abz, k, tol=1e-10):
 
 
 @njit(cache=True)
-def _edge_residuals(abz, kb, Zr, lam, mass, n_nodes):
+def _edge_checks(abz, kb, Zr, lam, mass, n_nodes, tri_dep, tri_master, tri_coef, fixed, full):
     """For the eigenpairs (lam[c], Zr[c]) in edge coordinates (rows of full z, links applied), in one pass over the
-    band: the node-coordinate vectors X = T z, the node-coordinate residuals K x - lam M x evaluated as
-    T^-T (K_e z) - lam M x (differences: no cancellation of the node-coordinate stiffness), M x, and |K_e| |z|
-    (round-off levels); each (k, n)."""
+    band: ``full`` (n, k) <- the node-coordinate vectors x = T z (zero on held DOFs), and per pair (columns of the
+    returned (5, k)): ||r||^2 and ||c||^2 of the residual r = K x - lam M x and of c = M x on the free variables of
+    the node coordinates (condensed by the links ``tri_*``, zero on ``fixed``), K x evaluated as T^-T (K_e z)
+    (differences: no cancellation of the node-coordinate stiffness); ||a||^2 and sum a_i |z_i| of a = |K_e| |z|
+    (round-off levels); x^T M x."""
     k, n = Zr.shape
     off = 2 * kb
-    Zc = np.empty((n, k))                       # by DOF, the k values side by side (one pass over the band)
     for c in range(k):
         for i in range(n):
-            Zc[i, c] = Zr[c, i]
+            full[i, c] = Zr[c, i]
     KZ = np.zeros((n, k))
-    AZc = np.zeros((n, k))
-    for j in range(n):                          # K_e z and |K_e| |z|
+    AZ = np.zeros((n, k))
+    for j in range(n):                          # K_e z and |K_e| |z|, the k vectors side by side
         for i in range(max(0, j - kb), min(n - 1, j + kb) + 1):
             a = abz[off + i - j, j]
             if a == 0.0:
                 continue
             for c in range(k):
-                v = a * Zc[j, c]
+                v = a * full[j, c]
                 KZ[i, c] += v
-                AZc[i, c] += abs(v)
-    X = np.empty((k, n))
-    R = np.empty((k, n))
-    MX = np.empty((k, n))
-    AZ = np.empty((k, n))
-    for c in range(k):
-        for i in range(n):
-            X[c, i] = Zr[c, i]
-            AZ[c, i] = AZc[i, c]
-        for a in range(3):
+                AZ[i, c] += abs(v)
+    for a in range(3):
+        for c in range(k):                      # x = T z: prefix sums
             acc = 0.0
             for node in range(n_nodes):
-                acc += Zr[c, 4 * node + a]
-                X[c, 4 * node + a] = acc
-        for i in range(n):
-            MX[c, i] = mass[i] * X[c, i]
-    for a in range(3):                          # T^-T: differences
-        for node in range(n_nodes - 1):
+                acc += full[4 * node + a, c]
+                full[4 * node + a, c] = acc
+        for node in range(n_nodes - 1):         # T^-T: differences
             for c in range(k):
                 KZ[4 * node + a, c] -= KZ[4 * (node + 1) + a, c]
+    out = np.zeros((5, k))
+    r = np.empty(n)
+    cm = np.empty(n)
     for c in range(k):
         for i in range(n):
-            R[c, i] = KZ[i, c] - lam[c] * MX[c, i]
-    return X, R, MX, AZ
+            mx = mass[i] * full[i, c]
+            r[i] = KZ[i, c] - lam[c] * mx
+            cm[i] = mx
+            out[2, c] += AZ[i, c] * AZ[i, c]
+            out[3, c] += AZ[i, c] * abs(Zr[c, i])
+            out[4, c] += full[i, c] * mx
+        for t in range(tri_dep.shape[0]):       # T_L^T on the node coordinates' free variables
+            r[tri_master[t]] += tri_coef[t] * r[tri_dep[t]]
+            cm[tri_master[t]] += tri_coef[t] * cm[tri_dep[t]]
+        for i in range(n):
+            if fixed[i]:
+                full[i, c] = 0.0
+                continue
+            out[0, c] += r[i] * r[i]
+            out[1, c] += cm[i] * cm[i]
+    return out
 
 
 def _edge_out(system, ez, abz_raw, edge, idx, mass, k, out):
@@ -709,20 +730,15 @@ def _edge_out(system, ez, abz_raw, edge, idx, mass, k, out):
     order = np.argsort(ev)[:k]
     ev = ev[order]
     eps = np.finfo(float).eps
-    full = np.zeros((system.rod.n_dof, order.size))
-    res, res_floor, floors = np.empty(order.size), np.empty(order.size), np.empty(order.size)
+    full = np.empty((system.rod.n_dof, order.size))
     Zr = np.array([zs[j] for j in order]).reshape(order.size, -1)
-    X, R, MX, AZ = _edge_residuals(abz_raw, EDGE_BAND, Zr, np.ascontiguousarray(ev), mass, ez.N)
-    for c in range(order.size):
-        z, x, r, mx, az = Zr[c], X[c], R[c], MX[c], AZ[c]
-        cm = condense_forces(system, mx.copy())
-        r = condense_forces(system, r)                   # zero on held DOFs: the part on the free variables
-        den = max(abs(ev[c]) * np.sqrt(dot(cm, cm)), 1e-300)
-        res[c] = np.sqrt(dot(r, r)) / den
-        res_floor[c] = 2.0 * eps * np.sqrt(dot(az, az)) / den
-        floors[c] = eps * dot_abs(az, z) / max(dot(x, mx), 1e-300)
-        x[system.fixed] = 0.0
-        full[:, c] = x
+    lk = system.links
+    sums = _edge_checks(abz_raw, EDGE_BAND, Zr, np.ascontiguousarray(ev), mass, ez.N, lk.tri_dep, lk.tri_master,
+                        lk.tri_coef, system.fixed, full)
+    den = np.maximum(np.abs(ev) * np.sqrt(sums[1]), 1e-300)
+    res = np.sqrt(sums[0]) / den
+    res_floor = 2.0 * eps * np.sqrt(sums[2]) / den
+    floors = eps * sums[3] / np.maximum(sums[4], 1e-300)
     out.update(eigenvalues=ev, vectors=full, residuals=res, residual_floors=res_floor, floors=floors,
                method=EDGE_METHOD, inertia=(neg, 0.0), eigen_solver=detail)
     return out

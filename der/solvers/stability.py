@@ -163,16 +163,14 @@ def _rigid_generator_rows(rod, state, rows):
         b, c = (a + 1) % 3, (a + 2) % 3
         col[3 + a] = np.sqrt(S[b, b] + S[c, c] + Tt[a, a])
     G = np.zeros((rows.size, 6))
-    for i, d in enumerate(rows):
-        node, slot = divmod(int(d), 4)
-        for a in range(3):
-            w = np.zeros(3)
-            w[a] = 1.0
-            if slot < 3:
-                G[i, slot] = 1.0
-                G[i, 3 + a] = np.cross(w, r[node])[slot]
-            elif node < rod.n_edges:
-                G[i, 3 + a] = t[node] @ w
+    node, slot = rows // 4, rows % 4
+    pos = slot < 3
+    G[np.flatnonzero(pos), slot[pos]] = 1.0
+    for i in np.flatnonzero(pos):              # e_a x r, component slot: the rows of [r]x^T
+        rx, ry, rz = r[node[i]]
+        G[i, 3:] = np.array([[0.0, rz, -ry], [-rz, 0.0, rx], [ry, -rx, 0.0]])[slot[i]]
+    ang = np.flatnonzero(~pos & (node < rod.n_edges))
+    G[ang, 3:] = t[node[ang]]
     return G, col
 
 

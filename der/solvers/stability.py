@@ -68,14 +68,22 @@ Edge coordinates
 ----------------
 An open rod held at its start (a clamp, hinge or roller at the start, or a pin on node 0; fix_theta anywhere;
 nothing else holding a node; no contact) with a symmetric stiffness and no symmetry mode is analysed in edge
-coordinates instead (``der.solvers.edge_coordinates``, method "edge shift-invert"): x_0, the edge vectors e_j = x_{j+1} - x_j and
-the angles. Its stiffness K_e = T^T K T (T: cumulative sums) is read off the assembled band by translation
+coordinates instead (``der.solvers.edge_coordinates``, method "edge shift-invert"): x_0, the edge vectors
+e_j = x_{j+1} - x_j and the angles. Its stiffness K_e = T^T K T (T: cumulative sums) is read off the assembled band by translation
 invariance in a few terms per entry, without the cancellation of the node-coordinate entries, and checked
 (K x = T^-T K_e T^-1 x on a random vector to round-off, else node coordinates); it is banded (half-bandwidth 7
 against 10). The mass T^T M T is dense but only applied, by cumulative sums, and factored as R^T R, R = M^1/2 T:
-Lanczos (ARPACK) runs on R K_e^-1 R^T, shift-invert at sigma = 0 on one banded LDL^T of K_e, whose pivots count
-the negative eigenvalues exactly (Sylvester) -- the stability verdict. The eigenvalues' round-off floors grow like
-eps n^2 (cantilever, lowest eigenvalue: error 8e-9 at n = 10^4, 4e-7 at 10^5, against its floor 3e-6). Residuals
+block Lanczos (``_edge_block_lanczos``; ARPACK if it does not converge within its basis) runs on R K_e^-1 R^T,
+shift-invert at sigma = 0 on one banded LDL^T of K_e (``linalg.band_ldlt_compact``), whose pivots count the
+negative eigenvalues exactly (Sylvester) -- the stability verdict. Two right-hand sides per pass over the factor
+(a straight rod bends alike in two planes: single-vector Lanczos, ARPACK's, needs round-off to find the second of
+each degenerate pair, and missed the second 3806.5 of the cantilever at n = 10^4, returning 14617 in its place);
+the Ritz pairs are residual-checked by the block Lanczos relation after every pass and the loop stops when the k
+wanted are all below 1e-9 (relative), 9-10 passes for k = 6 on the cantilever; the eigenvectors are the same
+combinations of the stored solves. When the analysis follows der.solve's implicit solver, the Hessian at the final
+state comes from the solver's last force evaluation (``system.take_hessian``). The eigenvalues' round-off floors
+grow like eps n^2 (cantilever, lowest eigenvalue: error 8e-9 at n = 10^4, 4e-7 at 10^5, against its floor 3e-6;
+3.6e-9 at 10^5 for the loaded state solved with ``edge_newton``). Residuals
 are evaluated in node coordinates, K x as T^-T K_e z (differences), with their round-off level (eps n^3 for a
 bending mode; the eigenvalue's error is quadratic in the residual). Rings, free rods, rods held elsewhere and
 scenes with symmetry modes keep the node-coordinate paths above.

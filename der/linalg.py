@@ -227,12 +227,14 @@ def band_ldlt_compact(ab, kl, ku, L, D):
     ``D``. Right-looking by columns, the trailing b columns updated in ``L`` and ``D`` themselves (each enters
     from ``ab`` b steps before its turn): O(n b^2) flops, a quarter of banded LU with partial pivoting. Compiled
     with ``kl`` a constant for der's two bandwidths (10: an open rod, 19: a folded ring; its short loops unrolled,
-    measured 1.5-1.8x faster).
+    measured 1.5-1.8x faster; 7: edge coordinates).
     Returns the number of negative pivots (the inertia of M, Sylvester), or -1 on a zero or non-finite pivot."""
     # the half-bandwidths of der's bands spelled out: the kernel is inlined with b a constant (a literal-typed
     # dispatch from Python costs milliseconds per call)
     if kl == 10:
         return _band_ldlt_compact(ab, 10, ku, L, D)
+    if kl == 7:          # edge coordinates (der.solvers.edge_coordinates)
+        return _band_ldlt_compact(ab, 7, ku, L, D)
     if kl == 19:
         return _band_ldlt_compact(ab, 19, ku, L, D)
     return _band_ldlt_compact(ab, kl, ku, L, D)
@@ -295,6 +297,30 @@ def _ldlt_compact_solve(L, D, y, b):
         y[k] = acc
 
 
+@njit(cache=True)
+def ldlt_compact_solve_block(L, D, Y):
+    """Y <- (L D L^T)^-1 Y in place for the columns of ``Y`` (n, m), C order, band order, with the factors of
+    ``band_ldlt_compact``: one pass over the factor for all m right-hand sides (the innermost loop runs over them)."""
+    n, b = L.shape
+    m = Y.shape[1]
+    for k in range(n):                       # L z = y, by columns of L
+        for s in range(1, min(b, n - 1 - k) + 1):
+            l = L[k, s - 1]
+            if l != 0.0:
+                for c in range(m):
+                    Y[k + s, c] -= l * Y[k, c]
+    for k in range(n):
+        inv = 1.0 / D[k]
+        for c in range(m):
+            Y[k, c] *= inv
+    for k in range(n - 1, -1, -1):           # L^T x = z
+        for s in range(1, min(b, n - 1 - k) + 1):
+            l = L[k, s - 1]
+            if l != 0.0:
+                for c in range(m):
+                    Y[k, c] -= l * Y[k + s, c]
+
+
 @njit(cache=True, inline="always")
 def _band_residual(ab, kl, ku, x, rhs, r):
     """r = rhs - A x (band order, A in rows kl.. of the general-band storage) and the componentwise backward
@@ -332,6 +358,8 @@ def _ldlt_solve_refined(ab, kl, ku, L, D, bp, x, r, tol, refinements):
     two bandwidths, as in ``band_ldlt_compact``.)"""
     if kl == 10 and ku == 10:
         return _ldlt_solve_refined_b(ab, 10, 10, L, D, bp, x, r, tol, refinements)
+    if kl == 7 and ku == 7:
+        return _ldlt_solve_refined_b(ab, 7, 7, L, D, bp, x, r, tol, refinements)
     if kl == 19 and ku == 19:
         return _ldlt_solve_refined_b(ab, 19, 19, L, D, bp, x, r, tol, refinements)
     return _ldlt_solve_refined_b(ab, kl, ku, L, D, bp, x, r, tol, refinements)

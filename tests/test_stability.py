@@ -115,14 +115,14 @@ def test_follower_loads_keep_the_node_coordinate_path():
 def test_edge_coordinates_stiffness_and_mass():
     """K_e read off the assembled band equals T^T K T (dense, n = 30) and M_e = T^T M T as applied by cumulative
     sums; a hinge at the start becomes a link between x_0 and the first edge."""
-    from der.solvers.stability import EDGE_BAND, _EdgeCoordinates
+    from der.solvers.edge_coordinates import EDGE_BAND, EdgeCoordinates
 
     rod = der.rod_from_shape(der.shapes.straight(1.0, 30), 1.0, 1.0, EA=1e3)
     scene = der.Scene(rod, loads=[der.end_force([1e-2, 3e-3, -0.2])], constraints=[der.hinge("start")])
     res = der.solve(scene, stability=False)
     system = build_system(scene, der.SolverOptions())
     evaluate_system(system, res.state, 2)
-    ez = _EdgeCoordinates(system, res.state)
+    ez = EdgeCoordinates(system, res.state, eigen_mass(rod))
     abz = ez.band(system.ab, system.kl, system.ku)
     assert ez.check_band(system.ab, system.kl, system.ku, abz) < 1e-14
     K = band_to_sparse(system.ab, system.kl, system.ku, system.perm).toarray()

@@ -61,23 +61,42 @@ def solve_implicit(system, state, options, progress=None, recorder=None):
     (Newton steps from far away can land where round-off hides every descent direction of the soft modes)
     the solve restarts once from the initial state with the cautious pseudo-time start, within what is left
     of the iteration and time budgets."""
-    if not options.newton_first:
-        return _relax(system, state, options, options.dt0, progress, recorder)
     start = state.copy()
     t_start = time.perf_counter()
-    first = _relax(system, state, options, options.dt_max, progress, recorder, 0, t_start)
+    result = _solve(system, state, options, progress, recorder, 0, t_start)
+    if getattr(options, "edge_newton", False) and result.status == "stalled" and result.linear_solves_edge:
+        # edge coordinates stalled (their pseudo-time damping diag |K_e| differs from the node coordinates'; a
+        # stiff inextensibility penalty far from equilibrium can leave them without progress): the node-coordinate
+        # solve from the start, within what is left of the budgets
+        state.copy_from(start)
+        again = _solve(system, state, options, progress, recorder, result.iterations, t_start, edge=False)
+        again.history = result.history + again.history
+        again.timings = {k: result.timings.get(k, 0.0) + v for k, v in again.timings.items()}
+        again.message += (f" (after the edge-coordinate Newton steps stalled at residual {result.residual:.2e} in "
+                          f"{result.iterations} iterations and the solve restarted in node coordinates)")
+        return again
+    return result
+
+
+def _solve(system, state, options, progress, recorder, it, t_start, edge=True):
+    """Newton's method first (``options.newton_first``), then once more from the start with dt0 if it stalls."""
+    if not options.newton_first:
+        return _relax(system, state, options, options.dt0, progress, recorder, it, t_start, edge)
+    start = state.copy()
+    first = _relax(system, state, options, options.dt_max, progress, recorder, it, t_start, edge)
     if first.status != "stalled":
         return first
     state.copy_from(start)
-    second = _relax(system, state, options, options.dt0, progress, recorder, first.iterations, t_start)
+    second = _relax(system, state, options, options.dt0, progress, recorder, first.iterations, t_start, edge)
     second.history = first.history + second.history
     second.timings = {k: first.timings.get(k, 0.0) + v for k, v in second.timings.items()}
+    second.linear_solves_edge += first.linear_solves_edge
     second.message += (f" (after Newton's method from the start stalled at residual {first.residual:.2e} in "
-                       f"{first.iterations} iterations and the solve restarted with dt0)")
+                       f"{first.iterations - it} iterations and the solve restarted with dt0)")
     return second
 
 
-def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_start=None):
+def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_start=None, edge_ok=True):
     """The pseudo-transient continuation loop from the pseudo-time step ``dt``; iterations are counted from
     ``it`` and the time budget from ``t_start`` (so that a restart shares both with the first attempt)."""
     rod = system.rod
@@ -113,6 +132,16 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     # energy), the band only when it is used -- a step, the floor's bound or verdict. A converged check and an
     # inextensible rod's multiplier update then assemble nothing (issue 17). With contact terms as before.
     lazy_band = IN_PLACE and not system.terms
+    # SolverOptions(edge_newton=True): Newton steps in edge coordinates for an open rod held at its start
+    # (der.solvers.edge_coordinates); ``f_node`` keeps the node forces f_ext - dE/dq at ``state`` for them
+    edge = None
+    edge_steps = 0
+    if edge_ok and getattr(options, "edge_newton", False) and not system.terms:
+        from .edge_coordinates import EdgeNewton, edge_eligible
+
+        if edge_eligible(system):
+            edge = EdgeNewton(system, state)
+            f_node = np.empty(n_dof)
     band_at_state = False
     # the load scale's edge forces and vertex moments, computed by that same order-1 pass (one rod, all terms)
     pass_forces = None
@@ -144,6 +173,8 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 # contact: the adaptive barrier stiffness changed (docs/contact.md section 6); a new landscape
                 energy = evaluate_system(system, state, 2)
                 best, since_best, potential_best = np.inf, 0, potential
+            if edge is not None:
+                np.subtract(system.fext, system.grad, out=f_node)
             R = residual_vector(system)
             scales = load_scales(system, state, forces)
             residual = residual_norm(system, R, scales)
@@ -213,6 +244,9 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
             diag[diag == 0] = 1.0
             fext[:] = system.fext
             round_off = floor_forces(system, state)
+            # edge coordinates: K_e read off the band at ``state`` once (the band is not factorised in place: every
+            # attempt below reuses it)
+            use_edge = edge is not None and edge.prepare(system.ab, kl, ku)
             accepted = False
             for _attempt in range(MAX_SHRINKS):
                 if in_place and _attempt > 0:
@@ -221,19 +255,29 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 if _attempt == 12 and residual < 100.0 * residual_floor(system, state, scales):
                     break   # near the round-off floor a step that lowers the energy may not exist
                 t_phase = time.perf_counter()
-                if in_place:
-                    work = system.ab
-                    band_at_state = False       # factorised in place just below
+                if use_edge:
+                    delta, info = edge.step(f_node, dt)
+                    system.linear_solves["edge"] = system.linear_solves.get("edge", 0) + 1
+                    edge_steps += 1
+                    if info == 0:
+                        # the node links exactly (T dz satisfies them to round-off): held DOFs zero, dependents
+                        # from their masters
+                        delta[system.fixed] = 0.0
+                        expand(system, delta)
                 else:
-                    work[:] = ab_K
-                add_diagonal(work, kl, ku, perm, diag, 1.0 / dt)
-                constrain_system(system, work, 1.0)     # T^T (K + D/dt) T: the end supports' free variables
-                if coo:
-                    delta, info = _contact_solve(system, work, coo, R)
-                else:
-                    delta, info = band_solve(work, kl, ku, perm, R, ldlt=getattr(system, "ldlt", None))
-                    system.linear_solves["band"] += 1
-                expand(system, delta)
+                    if in_place:
+                        work = system.ab
+                        band_at_state = False       # factorised in place just below
+                    else:
+                        work[:] = ab_K
+                    add_diagonal(work, kl, ku, perm, diag, 1.0 / dt)
+                    constrain_system(system, work, 1.0)     # T^T (K + D/dt) T: the end supports' free variables
+                    if coo:
+                        delta, info = _contact_solve(system, work, coo, R)
+                    else:
+                        delta, info = band_solve(work, kl, ku, perm, R, ldlt=getattr(system, "ldlt", None))
+                        system.linear_solves["band"] += 1
+                    expand(system, delta)
                 timings["factorisation"] += time.perf_counter() - t_phase
                 with np.errstate(over="ignore", invalid="ignore"):   # a huge step is refused just below
                     slope = dot(R, delta)
@@ -308,9 +352,12 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
         state.copy_from(last_good)
         status, message = "nonfinite", (f"numerical failure at iteration {it} ({type(exc).__name__}: {exc}); last "
                                         "finite state kept")
-    return final_result(system, state, status, residual=float(residual), iterations=it,
-                        wall_time=time.perf_counter() - t_start, message=message, solver="implicit", strain=strain,
-                        history=history, dt=dt, residual_floor=float(floor), timings=timings)
+    result = final_result(system, state, status, residual=float(residual), iterations=it,
+                          wall_time=time.perf_counter() - t_start, message=message, solver="implicit", strain=strain,
+                          history=history, dt=dt, residual_floor=float(floor), timings=timings,
+                          hessian=options.stability)
+    result.linear_solves_edge = edge_steps      # (this attempt's edge-coordinate steps: solve_implicit's fallback)
+    return result
 
 
 # ---- contact (issue 14): the sparse path, taken only while a contact term reports off-band triplets ----

@@ -27,6 +27,11 @@ class SolverOptions:
         is high because D / dt must fall below the softest stiffness, about n^-4 of the diagonal of a long rod.
     newton_first : start with Newton's method (dt at its cap) and fall back to dt0 when its step does not lower
         the energy; False starts every solve at dt0.
+    edge_newton : implicit solver, an open rod held at its start (a clamp, hinge or roller at the start, or a pin
+        on node 0; no contact, no follower loads): Newton steps in edge coordinates x_i = x_0 + sum_{j<i} e_j
+        (der.solvers.edge_coordinates), whose stiffness has condition number ~ n^2 instead of ~ n^4 -- a cantilever
+        of 10^5 edges converges there where the node-coordinate steps are round-off. Other scenes take
+        node-coordinate steps as usual (``result.linear_solves["edge"]`` counts the edge steps). Default False.
     line_search_steps, armijo : backtracking halvings per pseudo-time step and the sufficient-decrease factor.
     dt : explicit time step (physical time for the rod's line density rho_A); None picks ``safety / omega_max``,
         half the stability limit 2 / omega_max. A dt above the stability limit is refused with a ValueError.
@@ -64,6 +69,7 @@ class SolverOptions:
     time_budget: float = math.inf
     dt0: float = 1.0
     newton_first: bool = True
+    edge_newton: bool = False
     dt_max: float = 1e30
     dt_growth: float = 10.0
     line_search_steps: int = 10
@@ -197,7 +203,10 @@ class SolveResult:
         of the stiffness pencil (K, M), i.e. squared natural frequencies, with rigid-body and other symmetry
         modes removed. ``stable`` is False if one has a negative real part (divergence); ``flutter`` is True if
         complex eigenvalues appear among the lowest (circulatory loads: the undamped rod would flutter).
-    stability_time : seconds spent in the stability analysis (not part of ``wall_time``; 0 if not run).
+    stability_time : seconds spent in the stability analysis (not part of ``wall_time``; 0 if not run), with the
+        assembly of the Hessian at the final state (which the implicit solver does in its last force evaluation
+        when the analysis follows). ``stability_cpu_time``: the same in CPU seconds of this process
+        (``time.process_time``; tools/stability_scaling.py compares it with the solve's).
     stability_method : the eigen-solver path that ran ("dense", "banded shift-invert" in node coordinates, "edge
         shift-invert" in edge coordinates: open rods held at their start; "" if not run). See der.solvers.stability.
     energy : energy by term at the final state.
@@ -258,6 +267,7 @@ class SolveResult:
     residual_floor: float = float("nan")
     residual_per_length: float = float("nan")
     stability_time: float = 0.0
+    stability_cpu_time: float = 0.0
     stability_method: str = ""
     compile_time: float = 0.0
     reactions: list = field(default_factory=list)

@@ -16,6 +16,7 @@ for, against S_i / L) is n times larger for a uniform rod; it is what a solution
 acts like a spurious distributed load of that relative size). Newton's quadratic convergence usually takes both
 far below the tolerance in its last step; both are reported.
 """
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -579,13 +580,25 @@ def raise_if_interrupted(result):
 def final_result(system, state, status, **fields):
     """The SolveResult of a solve that ended in ``status`` at ``state``: the force-derived fields (load scale,
     residual per unit length, energy by term) are evaluated here, once, for both solvers."""
+    hessian = fields.pop("hessian", False)
     if system.parts is not None:          # several rods (multi.py)
         from . import multi
 
         return multi.final_result(system, state, status, **fields)
     from .options import CONVERGED_STATUSES, SolveResult
 
-    evaluate_system(system, state, 1)
+    # hessian=True (a stability analysis follows a converged solve): the force evaluation also assembles the band,
+    # the Hessian at the final state, which the analysis then takes instead of assembling it again (the forces of
+    # an order-2 pass are bitwise those of an order-1 pass: scene.evaluate)
+    hessian = hessian and status in CONVERGED_STATUSES and not system.terms
+    system.hessian_at = None
+    if hessian:
+        t0, c0 = time.perf_counter(), time.process_time()
+        evaluate_system(system, state, 2)
+        system.hessian_at = (state, state.q.copy(), state.lam.copy(), time.perf_counter() - t0,
+                             time.process_time() - c0)
+    else:
+        evaluate_system(system, state, 1)
     scales = load_scales(system, state)
     if status in CONVERGED_STATUSES and not np.isfinite(scales).all():
         # a residual relative to an infinite scale is 0 whatever the forces: no verdict can rest on it
@@ -595,6 +608,18 @@ def final_result(system, state, status, **fields):
     fields.setdefault("reactions", support_reactions(system, state))
     return SolveResult(state=state, converged=status in CONVERGED_STATUSES, status=status, load_scale=float(scales[0]),
                        energy=energy_terms(system, state), residual_per_length=per_length, **fields)
+
+
+def take_hessian(system, state):
+    """(wall, CPU) seconds its assembly took if ``system.ab`` holds the Hessian at ``state``, assembled by
+    ``final_result`` and untouched since (same state object, same coordinates and multipliers), else None. Either
+    way the band is no longer marked as that Hessian (the caller condenses or factorises it)."""
+    tok = getattr(system, "hessian_at", None)
+    system.hessian_at = None
+    if tok is None or tok[0] is not state or not np.array_equal(tok[1], state.q) or not np.array_equal(
+            tok[2], state.lam):
+        return None
+    return tok[3], tok[4]
 
 
 def support_reactions(system, state):

@@ -143,7 +143,10 @@ def test_floor_verdict_refuses_a_state_whose_newton_correction_is_not_round_off(
     wrong.q[:] = rod.rest_q + factor * (state.q - rod.rest_q)
     wrong = prepare_state(system, wrong)
     evaluate_system(system, wrong, 2)
-    status, _, message = floor_verdict(system, wrong, load_scales(system, wrong), 0.5 * floor, 1e-8, "test")
+    wrong_scales = load_scales(system, wrong)
+    # a residual under the wrong state's own floor bound (its scales are its own: its internal forces differ)
+    wrong_floor = residual_floor(system, wrong, wrong_scales)
+    status, _, message = floor_verdict(system, wrong, wrong_scales, 0.5 * wrong_floor, 1e-8, "test")
     assert status == "stalled" and "not at its round-off floor" in message
 
 
@@ -322,3 +325,20 @@ def test_a_helix_stretched_between_clamps_is_not_reported_locked():
         res = der.solve(scene, state=start, stability=False, raise_on_failure=False)
     assert res.status in ("converged", "converged_at_floor") and "locked" not in res.message
     assert res.load_scale > 100.0 * np.max(rod.A1) / rod.length ** 2     # far above A1/L^2: the old rule fired
+
+
+@pytest.mark.parametrize("n", [50, 400])
+def test_a_clamps_reaction_couple_does_not_set_the_force_scale(n):
+    # issue 11, found at n = 20,000 (tests/test_edge_newton.py): a cantilever under a transverse tip load P
+    # "converged" at residual 9.4e-9 with its tip 13 % short. The force scale was the largest dE/de over the edges,
+    # and the clamped end edge carries the clamp's reaction couple P L as forces +-P L / h: a scale n times the
+    # load, and a tolerance n times looser. The scale is now the load's (P: the applied force, the shear along the
+    # rod and the moment P L over L), whatever n, and a converged tip is P L^3 / (3 A1) to the discretisation.
+    P = 1e-3
+    rod = der.rod_from_shape(shapes.straight(1.0, n, axis=(0, 0, 1), director=(1, 0, 0)), 1.0, 1.0)
+    scene = der.Scene(rod, loads=[der.end_force([P, 0, 0])], constraints=[der.clamp("start")])
+    res = der.solve(scene, stability=False)
+    assert res.load_scale == pytest.approx(P, rel=1e-2)
+    assert res.status == "converged" and res.residual <= 1e-8, res.message
+    tip = res.state.positions[-1, 0] / (P / 3.0)
+    assert abs(tip - 1.0) < 1.0 / n, tip

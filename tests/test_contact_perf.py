@@ -135,6 +135,51 @@ def test_verlet_list_holds_every_pair_within_dhat():
     assert term.broad_phases == 2            # moved beyond the margin: rebuilt
 
 
+@pytest.mark.parametrize("samples", [None, 4])
+def test_long_step_list_holds_every_pair_within_dhat_on_the_step(samples):
+    """The pair list of one Newton step (BoundSelfContact.step_candidates, built once for the whole step q -> q + p
+    and reused by every line-search trial) holds every pair within range (dhat, plus the sampled barrier's extra)
+    at every sampled fraction alpha of the step, by brute force over all non-neighbour pairs -- for short steps
+    (filtered from the Verlet list) and long ones (a broad phase with the boxes inflated by each node's reach) --
+    and the trials on the step get that list back without another broad phase."""
+    from der.contact.broadphase import excluded
+    from der.solvers.options import SolverOptions
+    from der.solvers.system import build_system, prepare_state
+
+    rod, start = _line(60)
+    scene = der.Scene(rod, constraints=[der.clamp("start")], contacts=[der.self_contact(0.45, samples=samples)])
+    system = build_system(scene, SolverOptions())
+    term = system.terms[0]
+    pos = term.positions(prepare_state(system, start))
+    topo = term.topo
+    m = topo.edges.shape[0]
+    every = np.array([(i, j) for i in range(m) for j in range(i + 1, m)
+                      if not excluded(i, j, topo.rod_of_edge, topo.local_edge, topo.rod_n_edges, topo.rod_closed,
+                                      topo.rod_k)], dtype=np.int64)
+    rng_ = term.dhat + term.pair_range_extra
+    rng = np.random.default_rng(1)
+    seen_in_range = 0
+    for size in (0.02, 0.1, 0.3, 1.0, 3.0):     # the Verlet margin is r = 0.45: short and long steps
+        for _ in range(4):
+            dpos = rng.normal(size=pos.shape) * size
+            listed = term.step_candidates(pos, dpos)
+            listed_set = {tuple(p) for p in listed}
+            assert len(listed_set) == len(listed)
+            phases = term.broad_phases
+            for alpha in np.linspace(0.0, 1.0, 21):
+                x = pos + alpha * dpos
+                gap = term._pair_data(x, every)[0]
+                within = {tuple(p) for p in every[gap < rng_]}
+                seen_in_range += len(within)
+                assert within <= listed_set, (size, alpha, within - listed_set)
+                assert term.candidates(x) is listed           # a trial on the step: the step's list
+            assert term.broad_phases == phases
+    assert seen_in_range > 0
+    # the list is narrower than the Verlet list it comes from on a short step
+    dpos = rng.normal(size=pos.shape) * 1e-3
+    assert len(term.step_candidates(pos, dpos)) < len(term._list[1])
+
+
 def test_independent_ring_energy_gradient_and_writhe():
     sys.path.insert(0, os.path.join(ROOT, "tools"))
     from ring_contact_check import Ring

@@ -61,6 +61,47 @@ def test_reordered_banded_solve_equals_a_dense_solve(closed):
     assert sum(bandwidths(kl, ku, perm, rows, cols, ident)) > 2 * (kl2 + ku2)
 
 
+def _symmetric(ab, kl, ku, perm, shift):
+    """The band made symmetric (its lower triangle mirrored) plus shift on the diagonal."""
+    n = ab.shape[1]
+    off = kl + ku
+    inv = np.argsort(perm)
+    for j in range(n):
+        for i in range(j + 1, min(n - 1, j + kl) + 1):
+            ab[off + j - i, i] = ab[off + i - j, j]      # A[inv i, inv j] -> A[inv j, inv i]
+        ab[off, j] += shift
+    return ab
+
+
+@pytest.mark.parametrize("shift, cholesky", [(60.0, True), (-60.0, False)])
+def test_reordered_banded_cholesky_solve_equals_a_dense_solve(shift, cholesky):
+    """The symmetric path of the reordered contact band (LAPACK's banded Cholesky, refined against the whole
+    matrix): a symmetric positive definite band plus PSD pair blocks is solved by it to the dense solution; an
+    indefinite one is refused and solved by dgbsv, just as correctly, and the next solves go to dgbsv directly."""
+    import scipy.sparse as sp
+
+    from der.contact.reorder import CHOLESKY_RETRY_AFTER, BandCholesky
+
+    ab, kl, ku, perm, rows, cols, vals = _band_plus_contact(60, False, 5)
+    ab = _symmetric(ab, kl, ku, perm, shift)
+    n = ab.shape[1]
+    rb, cb, vb = band_to_coo(ab, kl, ku, perm)
+    A = sp.csr_matrix((np.concatenate([vb, vals]), (np.concatenate([rb, rows]), np.concatenate([cb, cols]))),
+                      shape=(n, n)).toarray()
+    assert np.allclose(A, A.T)
+    assert (np.linalg.eigvalsh(A).min() > 0) == cholesky
+    rhs = np.random.default_rng(6).standard_normal(n)
+    newpos, kl2, ku2 = block_order(ab, kl, ku, perm, rows, cols)
+    chol = BandCholesky()
+    x, info = banded_solve(ab, kl, ku, perm, rows, cols, vals, rhs, newpos, kl2, ku2, chol)
+    assert info == 0
+    assert np.allclose(x, np.linalg.solve(A, rhs), rtol=1e-10, atol=1e-12)
+    assert chol.counts == ({"cholesky": 1, "dgbsv": 0, "cholesky_refused": 0} if cholesky else
+                           {"cholesky": 0, "dgbsv": 1, "cholesky_refused": 1})
+    banded_solve(ab, kl, ku, perm, rows, cols, vals, rhs, newpos, kl2, ku2, chol)
+    assert chol.skip == (0 if cholesky else CHOLESKY_RETRY_AFTER - 1)
+
+
 def test_contact_solve_paths_agree_on_a_supercoiled_ring():
     """The twisted ring of scenarios/twisted_ring.py in self-contact (a closed rod: der's interleaved band
     layout) solved with the banded (RCM) contact path and with splu: the same equilibrium (energy, writhe, contacts;

@@ -446,7 +446,8 @@ class BoundSelfContact(BoundBarrier):
     def diagnostics(self, state):
         """Pairs in contact (gap < dhat), their gaps, forces (-kappa b'(gap), force units), forces per length
         (over the pair's mean rest edge length), contact points, and the smallest centreline distance over all
-        non-neighbour pairs (brute force up to 4000 edges, else over pairs within 4r)."""
+        non-neighbour pairs (over the pairs a broad phase finds within 4r; if none is that close, brute force up to
+        4000 edges)."""
         pos = self.positions(state)
         topo = self.topo
         pairs = self.C.candidate_pairs(pos, topo, self.dhat + self.pair_range_extra)
@@ -462,14 +463,16 @@ class BoundSelfContact(BoundBarrier):
         pairs, gap, force, pa, pb = pairs[keep], gap[keep], force[keep], pa[keep], pb[keep]
         l_bar = self.rod.l_bar
         per_length = force / (0.5 * (l_bar[pairs[:, 0]] + l_bar[pairs[:, 1]])) if pairs.size else force
-        if topo.edges.shape[0] <= 4000:
+        # the pairs within 4r by the broad phase (a superset of those with gap < 4r, in the brute force's order):
+        # if one is, the smallest gap is among them; else brute force up to 4000 edges (O(n^2))
+        near = self.C.candidate_pairs(pos, topo, 4.0 * self.radius)
+        near = near[np.lexsort((near[:, 1], near[:, 0]))]
+        g = self._pair_data(pos, near)[0] if near.size else np.array([np.inf])
+        p = int(np.argmin(g))
+        g_min, ea, eb = (float(g[p]), *near[p]) if near.size else (np.inf, -1, -1)
+        if not g_min < 4.0 * self.radius and topo.edges.shape[0] <= 4000:
             g_min, ea, eb = self.A.min_pair_gap(pos, topo.edges, topo.rod_of_edge, topo.local_edge, topo.rod_n_edges,
                                                 topo.rod_closed, topo.rod_k, topo.edge_radius)
-        else:
-            near = self.C.candidate_pairs(pos, topo, 4.0 * self.radius)
-            g, *_ = self._pair_data(pos, near) if near.size else (np.array([np.inf]),)
-            p = int(np.argmin(g))
-            g_min, ea, eb = (float(g[p]), *near[p]) if near.size else (np.inf, -1, -1)
         return {
             "kind": "self_contact", "radius": self.radius, "dhat": self.dhat, "kappa": self.kappa,
             "n_contacts": int(pairs.shape[0]), "pairs": pairs.tolist(), "gap": gap.tolist(), "force": force.tolist(),

@@ -188,7 +188,8 @@ def test_long_step_list_holds_every_pair_within_dhat_on_the_step(samples):
     from der.solvers.system import build_system, prepare_state
 
     rod, start = _line(60)
-    scene = der.Scene(rod, constraints=[der.clamp("start")], contacts=[der.self_contact(0.45, samples=samples)])
+    # r = 0.1: the start is admissible (smallest gap 0.11), the Verlet margin is r
+    scene = der.Scene(rod, constraints=[der.clamp("start")], contacts=[der.self_contact(0.1, samples=samples)])
     system = build_system(scene, SolverOptions())
     term = system.terms[0]
     pos = term.positions(prepare_state(system, start))
@@ -199,26 +200,41 @@ def test_long_step_list_holds_every_pair_within_dhat_on_the_step(samples):
                                       topo.rod_k)], dtype=np.int64)
     rng_ = term.dhat + term.pair_range_extra
     rng = np.random.default_rng(1)
-    seen_in_range = 0
-    for size in (0.02, 0.1, 0.3, 1.0, 3.0):     # the Verlet margin is r = 0.45: short and long steps
+    seen_in_range = listed_steps = 0
+
+    def check(listed, dpos, alphas):
+        nonlocal seen_in_range
+        listed_set = {tuple(p) for p in listed}
+        assert len(listed_set) == len(listed)
+        phases = term.broad_phases
+        for alpha in alphas:
+            x = pos + alpha * dpos
+            gap = term._pair_data(x, every)[0]
+            within = {tuple(p) for p in every[gap < rng_]}
+            seen_in_range += len(within)
+            assert within <= listed_set, (alpha, within - listed_set)
+            assert term.candidates(x) is listed           # a trial on the step: the step's list
+        assert term.broad_phases == phases
+
+    for size in (0.002, 0.01, 0.03, 0.1, 0.3, 1.0):     # short and long steps
         for _ in range(4):
             dpos = rng.normal(size=pos.shape) * size
-            listed = term.step_candidates(pos, dpos)
-            listed_set = {tuple(p) for p in listed}
-            assert len(listed_set) == len(listed)
-            phases = term.broad_phases
-            for alpha in np.linspace(0.0, 1.0, 21):
-                x = pos + alpha * dpos
-                gap = term._pair_data(x, every)[0]
-                within = {tuple(p) for p in every[gap < rng_]}
-                seen_in_range += len(within)
-                assert within <= listed_set, (size, alpha, within - listed_set)
-                assert term.candidates(x) is listed           # a trial on the step: the step's list
-            assert term.broad_phases == phases
-    assert seen_in_range > 0
+            listed, full = term.step_candidates(pos, dpos, ccd=False)
+            assert full
+            check(listed, dpos, np.linspace(0.0, 1.0, 21))
+            # the solver's path: max_step lists the step up to its CCD-safe fraction, where the trials stay
+            delta = np.zeros(term.n_dof)
+            delta.reshape(-1, 4)[:term.n_nodes, :3] = dpos
+            term._step = None
+            tau = term.max_step(prepare_state(system, start), delta)
+            assert 0.0 < tau <= 1.0
+            if term._step is not None:     # (a long step whose safe part is long too: the Verlet list, as before)
+                listed_steps += 1
+                check(term._step[2], dpos, np.linspace(0.0, tau, 21))
+    assert seen_in_range > 0 and listed_steps >= 8
     # the list is narrower than the Verlet list it comes from on a short step
     dpos = rng.normal(size=pos.shape) * 1e-3
-    assert len(term.step_candidates(pos, dpos)) < len(term._list[1])
+    assert len(term.step_candidates(pos, dpos)[0]) < len(term._list[1])
 
 
 def test_independent_ring_energy_gradient_and_writhe():

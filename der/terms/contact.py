@@ -303,16 +303,21 @@ class BoundSelfContact(BoundBarrier):
         self._list = (pos.copy(), pairs)
         return pairs if pos1 is None else self.candidates(pos, pos1)
 
-    def step_candidates(self, pos, dpos):
+    def step_candidates(self, pos, dpos, ccd=True):
         """The pair list of one Newton step pos -> pos + dpos, built once and reused by all its line-search trials
         (``candidates``): every pair whose gap can come within range (dhat, plus the sampled barrier's extra) on
         any state whose node i stays within reach_i = |dpos_i| of pos -- so on every fraction of the step. Filtered
         from a list that holds all such pairs (the Verlet list while the whole reach stays inside its margin, else
         a broad phase with the boxes inflated by the reach) by the CCD's distance bound (der/contact/ccd.py
         ``reach_pairs``: gap >= gap(pos) - the two edges' largest reaches). A pair left out keeps its gap above
-        the range on the whole step: no barrier, no contact, no CCD needed."""
+        the range on the whole step: no barrier, no contact, no CCD needed.
+
+        Returns (pairs, listed). A step beyond the Verlet margin, with ``ccd``: the CCD's candidates from the boxes
+        swept over it (tighter than the reach along a straight step) and listed False -- ``max_step`` then lists
+        the step's CCD-safe part only (a Newton step far from equilibrium can be long and cut to a small fraction,
+        and the trials never go beyond it)."""
         if not STEP_LIST:
-            return self.candidates(pos, pos + dpos)
+            return self.candidates(pos, pos + dpos), False
         C = self.C
         rng = self.dhat + self.pair_range_extra
         reach = np.empty(pos.shape[0])
@@ -329,12 +334,14 @@ class BoundSelfContact(BoundBarrier):
             wide = C.candidate_pairs(pos, self.topo, rng + self.margin)
             self._list = (pos.copy(), wide)
         if wide is None:
-            # a long step: boxes inflated by the reach (not kept)
             self.broad_phases += 1
+            if ccd:
+                return C.candidate_pairs(pos, self.topo, rng, pos1=pos + dpos), False
+            # a long step: boxes inflated by the reach (not kept)
             wide = C.candidate_pairs(pos, self.topo, rng, reach=reach)
         pairs = C.reach_pairs(pos, reach, self.topo.edges, wide, self.topo.edge_radius, rng)
         self._step = (pos.copy(), reach, pairs)
-        return pairs
+        return pairs, True
 
     def check_start(self, state, tight_bend="refuse"):
         curvature_radius_check(self.rod, state, self.radius, "der.self_contact", tight_bend)
@@ -425,7 +432,7 @@ class BoundSelfContact(BoundBarrier):
     def max_step(self, state, delta):
         pos = self.positions(state)
         dpos = np.ascontiguousarray(delta.reshape(-1, 4)[:self.n_nodes, :3])
-        pairs = self.step_candidates(pos, dpos)
+        pairs, listed = self.step_candidates(pos, dpos)
         tau, worst, _ = self.C.pairs_ccd(pos, dpos, self.topo.edges, pairs, self.topo.edge_radius, MIN_GAP_FRACTION,
                                          1e-6, 10000)
         self.ccd_pair = (int(pairs[worst, 0]), int(pairs[worst, 1])) if tau < 1.0 and worst >= 0 else None
@@ -434,6 +441,11 @@ class BoundSelfContact(BoundBarrier):
             tau_s, _ = self.S.sampled_ccd(pos, dpos, self.topo.edges, pairs, self.topo.edge_radius, self.edge_len,
                                           self.owns_end, self.samples, MIN_GAP_FRACTION)
             tau = min(tau, tau_s)
+        if STEP_LIST and not listed and 0.0 < 2.0 * tau * float(np.sqrt((dpos * dpos).sum(axis=1)).max()) <= self.margin:
+            # a long step cut short by the CCD: the trials' list for its CCD-safe part [0, tau] (the line search
+            # starts at most there), if that fits in the Verlet margin; else the trials use the Verlet list, as
+            # before (measured: a list for the reach of a long step holds many more pairs than one at the trial)
+            self.step_candidates(pos, tau * dpos, ccd=False)
         return float(tau)
 
     def _min_curvature_radius(self, state):

@@ -61,6 +61,47 @@ def test_reordered_banded_solve_equals_a_dense_solve(closed):
     assert sum(bandwidths(kl, ku, perm, rows, cols, ident)) > 2 * (kl2 + ku2)
 
 
+def _symmetric(ab, kl, ku, perm, shift):
+    """The band made symmetric (its lower triangle mirrored) plus shift on the diagonal."""
+    n = ab.shape[1]
+    off = kl + ku
+    inv = np.argsort(perm)
+    for j in range(n):
+        for i in range(j + 1, min(n - 1, j + kl) + 1):
+            ab[off + j - i, i] = ab[off + i - j, j]      # A[inv i, inv j] -> A[inv j, inv i]
+        ab[off, j] += shift
+    return ab
+
+
+@pytest.mark.parametrize("shift, cholesky", [(60.0, True), (-60.0, False)])
+def test_reordered_banded_cholesky_solve_equals_a_dense_solve(shift, cholesky):
+    """The symmetric path of the reordered contact band (LAPACK's banded Cholesky, refined against the whole
+    matrix): a symmetric positive definite band plus PSD pair blocks is solved by it to the dense solution; an
+    indefinite one is refused and solved by dgbsv, just as correctly, and the next solves go to dgbsv directly."""
+    import scipy.sparse as sp
+
+    from der.contact.reorder import CHOLESKY_RETRY_AFTER, BandCholesky
+
+    ab, kl, ku, perm, rows, cols, vals = _band_plus_contact(60, False, 5)
+    ab = _symmetric(ab, kl, ku, perm, shift)
+    n = ab.shape[1]
+    rb, cb, vb = band_to_coo(ab, kl, ku, perm)
+    A = sp.csr_matrix((np.concatenate([vb, vals]), (np.concatenate([rb, rows]), np.concatenate([cb, cols]))),
+                      shape=(n, n)).toarray()
+    assert np.allclose(A, A.T)
+    assert (np.linalg.eigvalsh(A).min() > 0) == cholesky
+    rhs = np.random.default_rng(6).standard_normal(n)
+    newpos, kl2, ku2 = block_order(ab, kl, ku, perm, rows, cols)
+    chol = BandCholesky()
+    x, info = banded_solve(ab, kl, ku, perm, rows, cols, vals, rhs, newpos, kl2, ku2, chol)
+    assert info == 0
+    assert np.allclose(x, np.linalg.solve(A, rhs), rtol=1e-10, atol=1e-12)
+    assert chol.counts == ({"cholesky": 1, "dgbsv": 0, "cholesky_refused": 0} if cholesky else
+                           {"cholesky": 0, "dgbsv": 1, "cholesky_refused": 1})
+    banded_solve(ab, kl, ku, perm, rows, cols, vals, rhs, newpos, kl2, ku2, chol)
+    assert chol.skip == (0 if cholesky else CHOLESKY_RETRY_AFTER - 1)
+
+
 def test_contact_solve_paths_agree_on_a_supercoiled_ring():
     """The twisted ring of scenarios/twisted_ring.py in self-contact (a closed rod: der's interleaved band
     layout) solved with the banded (RCM) contact path and with splu: the same equilibrium (energy, writhe, contacts;
@@ -133,6 +174,67 @@ def test_verlet_list_holds_every_pair_within_dhat():
     assert term.broad_phases == 1            # all reused
     term.candidates(pos + 2 * term.margin)
     assert term.broad_phases == 2            # moved beyond the margin: rebuilt
+
+
+@pytest.mark.parametrize("samples", [None, 4])
+def test_long_step_list_holds_every_pair_within_dhat_on_the_step(samples):
+    """The pair list of one Newton step (BoundSelfContact.step_candidates, built once for the whole step q -> q + p
+    and reused by every line-search trial) holds every pair within range (dhat, plus the sampled barrier's extra)
+    at every sampled fraction alpha of the step, by brute force over all non-neighbour pairs -- for short steps
+    (filtered from the Verlet list) and long ones (a broad phase with the boxes inflated by each node's reach) --
+    and the trials on the step get that list back without another broad phase."""
+    from der.contact.broadphase import excluded
+    from der.solvers.options import SolverOptions
+    from der.solvers.system import build_system, prepare_state
+
+    rod, start = _line(60)
+    # r = 0.1: the start is admissible (smallest gap 0.11), the Verlet margin is r
+    scene = der.Scene(rod, constraints=[der.clamp("start")], contacts=[der.self_contact(0.1, samples=samples)])
+    system = build_system(scene, SolverOptions())
+    term = system.terms[0]
+    pos = term.positions(prepare_state(system, start))
+    topo = term.topo
+    m = topo.edges.shape[0]
+    every = np.array([(i, j) for i in range(m) for j in range(i + 1, m)
+                      if not excluded(i, j, topo.rod_of_edge, topo.local_edge, topo.rod_n_edges, topo.rod_closed,
+                                      topo.rod_k)], dtype=np.int64)
+    rng_ = term.dhat + term.pair_range_extra
+    rng = np.random.default_rng(1)
+    seen_in_range = listed_steps = 0
+
+    def check(listed, dpos, alphas):
+        nonlocal seen_in_range
+        listed_set = {tuple(p) for p in listed}
+        assert len(listed_set) == len(listed)
+        phases = term.broad_phases
+        for alpha in alphas:
+            x = pos + alpha * dpos
+            gap = term._pair_data(x, every)[0]
+            within = {tuple(p) for p in every[gap < rng_]}
+            seen_in_range += len(within)
+            assert within <= listed_set, (alpha, within - listed_set)
+            assert term.candidates(x) is listed           # a trial on the step: the step's list
+        assert term.broad_phases == phases
+
+    for size in (0.002, 0.01, 0.03, 0.1, 0.3, 1.0):     # short and long steps
+        for _ in range(4):
+            dpos = rng.normal(size=pos.shape) * size
+            listed, full = term.step_candidates(pos, dpos, ccd=False)
+            assert full
+            check(listed, dpos, np.linspace(0.0, 1.0, 21))
+            # the solver's path: max_step lists the step up to its CCD-safe fraction, where the trials stay
+            delta = np.zeros(term.n_dof)
+            delta.reshape(-1, 4)[:term.n_nodes, :3] = dpos
+            term._step = None
+            tau = term.max_step(prepare_state(system, start), delta)
+            assert 0.0 < tau <= 1.0
+            if term._step is not None:     # (a long step whose safe part is long too: the Verlet list, as before)
+                listed_steps += 1
+                check(term._step[2], dpos, np.linspace(0.0, tau, 21))
+    assert seen_in_range > 0 and listed_steps >= 8
+    # the list is narrower than the Verlet list it comes from on a short step
+    dpos = rng.normal(size=pos.shape) * 1e-3
+    assert len(term.step_candidates(pos, dpos)[0]) < len(term._list[1])
 
 
 def test_independent_ring_energy_gradient_and_writhe():

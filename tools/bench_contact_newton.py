@@ -1,7 +1,8 @@
 """Time and memory of one contact Newton iteration of the implicit solver against n, with the fitted exponent.
 
     python tools/bench_contact_newton.py [--n 200 400 1000 3000 10000] [--iterations 6] [--repeat 3] [--json]
-                                         [--state FILE] [--splu]
+                                         [--state FILE] [--splu] [--samples m] [--no-memory] [--old-list]
+                                         [--no-cholesky]
 
 Configuration: the plectoneme of scenarios/plectoneme.py (L = 20, A1 = 1, A2 = 1/0.67, EA = 1e5, r = 0.05,
 F = 1, clamped bottom, top turned and sliding) at 5 turns, a converged state at n = 400 (``--state``, a pickle
@@ -11,15 +12,19 @@ fine resampling does not bend tighter than r at the coarse polygon's corners, as
 n = 10,000) and widened across the axis by the least of 2, 5, 10, 20, 40 % that keeps its strands more than 2r
 apart. ``--samples m``: the contact term with m sample points per edge (der.self_contact(r, samples=m)). Each n: der.solve from that start with max_iterations = --iterations, with self-contact
 (the sparse path: RCM + banded LU, or splu) and, for the same start and the same iterations, without it (the
-banded path); time per iteration = (wall time of a solve of 2 + --iterations iterations minus that of 2) /
---iterations, the median of --repeat; memory = tracemalloc's
-peak of the solve (numpy's allocations). The exponent is the least-squares slope of log(time) against log(n).
+banded path); time per iteration = (CPU time, ``time.process_time``, of a solve of 2 + --iterations iterations
+minus that of 2) / --iterations, the median of --repeat; memory = tracemalloc's peak of the solve (numpy's
+allocations; ``--no-memory``: not traced, tracemalloc slows every allocation). ``--old-list``: the contact line
+search on the Verlet list, as before the one pair list per Newton step (der/terms/contact.py STEP_LIST = False),
+for a side-by-side run; ``--no-cholesky``: the reordered band factorised by dgbsv only, as before the banded
+Cholesky (der/solvers/implicit.py CONTACT_CHOLESKY = False). The exponent is the least-squares slope of log(time) against log(n).
 """
 import argparse
 import json
 import os
 import pickle
 import sys
+import time
 import tracemalloc
 
 import numpy as np
@@ -40,12 +45,16 @@ def base_state(path):
     import plectoneme as P
 
     p = argparse.Namespace(A1=A1, A2=A2, L=L, EA=EA, radius=R, force=F, turns=5.0, sweep=20, perturb=1e-3, png=None,
+                           samples=None, predictor="last",
                            n=400)
     keep = {}
 
     class Solver:
+        args = argparse.Namespace(tol=1e-4)
+
         def solve(self, scene, **kw):
-            r = der.solve(scene, tol=1e-4, raise_on_failure=False, **kw)
+            kw.setdefault("tol", 1e-4)
+            r = der.solve(scene, raise_on_failure=False, **kw)
             keep["x"] = r.state.positions
             return r
 
@@ -67,6 +76,7 @@ def resample(x, n, widen):
 
 
 SAMPLES = None     # --samples
+MEMORY = True      # --no-memory: False
 
 
 def one(n, x400, iterations, contact):
@@ -97,12 +107,17 @@ def _solve(n, x400, iterations, contact):
         if not pairs.size or min_distance(x, topo.edges, pairs) > 2 * R * (1 + 1e-6):
             break
     start = rod.displaced(rod.rest_state(), x - rod.rest_state().positions)
-    tracemalloc.start()
+    if MEMORY:
+        tracemalloc.start()
+    c0 = time.process_time()
     r = der.solve(scene, state=start, stability=False, max_iterations=iterations, raise_on_failure=False, tol=1e-14)
-    peak = tracemalloc.get_traced_memory()[1]
-    tracemalloc.stop()
+    cpu = time.process_time() - c0
+    peak = 0
+    if MEMORY:
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
     r.widen = widen
-    return r.wall_time, peak, r
+    return cpu, peak, r
 
 
 def main(argv=None):
@@ -113,14 +128,26 @@ def main(argv=None):
     ap.add_argument("--state", default=None)
     ap.add_argument("--splu", action="store_true", help="the contact path with splu (COLAMD) only, as before RCM")
     ap.add_argument("--samples", type=int, default=None, help="sample points per edge of the contact barrier")
+    ap.add_argument("--no-memory", action="store_true", help="do not trace the peak memory (tracemalloc)")
+    ap.add_argument("--old-list", action="store_true",
+                    help="line-search trials on the Verlet list, not one pair list per Newton step (the A/B)")
+    ap.add_argument("--no-cholesky", action="store_true",
+                    help="the reordered contact band by dgbsv only, not the banded Cholesky (the A/B)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
-    global SAMPLES
+    global SAMPLES, MEMORY
     SAMPLES = args.samples
-    if args.splu:
-        import der.solvers.implicit as implicit
+    MEMORY = not args.no_memory
+    if args.old_list:
+        import der.terms.contact as contact_term
 
+        contact_term.STEP_LIST = False
+    import der.solvers.implicit as implicit
+
+    if args.splu:
         implicit.BANDED_CONTACT = False
+    if args.no_cholesky:
+        implicit.CONTACT_CHOLESKY = False
     from der.terms import warmup
 
     warmup()
@@ -153,9 +180,10 @@ def main(argv=None):
     rows = [r for r in rows if "refused" not in r]
     ns = np.array([r["n"] for r in rows], float)
     fit = lambda k: float(np.polyfit(np.log(ns), np.log([r[k] for r in rows]), 1)[0]) if len(rows) > 1 else None  # noqa
-    out = {"tool": "bench_contact_newton", "splu": args.splu, "samples": args.samples, "rows": rows, "refused": refused, "exponent_time": fit("contact_s_per_iteration"),
+    out = {"tool": "bench_contact_newton", "cpu_time": True, "splu": args.splu, "old_list": args.old_list, "cholesky": not args.no_cholesky,
+           "samples": args.samples, "rows": rows, "refused": refused, "exponent_time": fit("contact_s_per_iteration"),
            "exponent_time_band": fit("band_s_per_iteration"),
-           "exponent_linear_solve": fit("contact_s_per_linear_solve"), "exponent_memory": fit("peak_bytes")}
+           "exponent_linear_solve": fit("contact_s_per_linear_solve"), "exponent_memory": fit("peak_bytes") if MEMORY else None}
     if args.json:
         print(json.dumps(out, indent=1))
     else:
@@ -168,8 +196,9 @@ def main(argv=None):
                   f"{r['band_s_per_linear_solve'] * 1e3:.2f} ms | {r['linear_solve_ratio']:.1f} | {r['peak_bytes'] / 1e6:.1f} MB |")
         for r in refused:
             print(f"n = {r['n']:,}: refused: {r['refused']}")
-        print(f"fitted exponents: time n^{out['exponent_time']:.2f} (no contact n^{out['exponent_time_band']:.2f}), "
-              f"memory n^{out['exponent_memory']:.2f}")
+        if out["exponent_time"] is not None:
+            print(f"fitted exponents: time n^{out['exponent_time']:.2f} (no contact n^{out['exponent_time_band']:.2f})"
+                  + (f", memory n^{out['exponent_memory']:.2f}" if MEMORY else ""))
     return 0
 
 

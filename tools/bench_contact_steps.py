@@ -29,12 +29,15 @@ def save(directory, turns, sweep, n):
 
     os.makedirs(directory, exist_ok=True)
     p = argparse.Namespace(A1=1.0, A2=1 / 0.67, L=20.0, EA=1e5, radius=0.05, force=1.0, turns=turns, sweep=sweep,
-                           perturb=1e-3, png=None, n=n)
+                           perturb=1e-3, png=None, n=n, samples=None, predictor="last")
     count = []
 
     class Saver:
+        args = argparse.Namespace(tol=1e-4)
+
         def solve(self, scene, **kw):
-            r = der.solve(scene, tol=1e-4, **kw)
+            kw.setdefault("tol", 1e-4)
+            r = der.solve(scene, **kw)
             with open(os.path.join(directory, f"state_{len(count)}.pkl"), "wb") as f:
                 pickle.dump((scene, r.state), f)
             count.append(1)

@@ -14,7 +14,7 @@ import numpy as np
 
 from .barrier import GAP, SQUARED, active_pairs, assemble_pairs, pair_barrier  # noqa: F401
 from .broadphase import edge_boxes, exclusion_k, hash_grid_pairs, swept_edge_boxes  # noqa: F401
-from .ccd import pairs_ccd, segment_ccd  # noqa: F401
+from .ccd import pairs_ccd, reach_pairs, segment_ccd, step_reach, within_reach  # noqa: F401
 from .distance import segment_distance2, segment_distance2_derivatives  # noqa: F401
 
 __all__ = ["ContactTopology", "topology", "candidate_pairs", "barrier_system", "safe_step", "exclusion_k",
@@ -75,15 +75,19 @@ def _positions(name, pos, topo, caller):
     return np.ascontiguousarray(pos)
 
 
-def candidate_pairs(pos, topo, dhat, pos1=None):
+def candidate_pairs(pos, topo, dhat, pos1=None, reach=None):
     """Edge pairs that may be within the barrier range (gap < dhat) at pos, or, with pos1, at any time of the
-    linear step pos -> pos1 (boxes swept over the step). Neighbours along a rod are excluded."""
+    linear step pos -> pos1 (boxes swept over the step), or, with ``reach`` (n_nodes,), at any positions within
+    reach[i] of pos for every node i (each edge's box inflated by its nodes' larger reach). Neighbours along a rod
+    are excluded."""
     if not (np.isfinite(dhat) and dhat >= 0):
         raise ValueError(f"candidate_pairs: dhat must be finite and >= 0, got {dhat!r}")
     pos = _positions("pos", pos, topo, "candidate_pairs")
     if pos1 is not None:
         pos1 = _positions("pos1", pos1, topo, "candidate_pairs")
     inflate = topo.edge_radius + 0.5 * dhat
+    if reach is not None:
+        inflate = inflate + np.maximum(reach[topo.edges[:, 0]], reach[topo.edges[:, 1]])
     m = topo.edges.shape[0]
     lo, hi = np.empty((m, 3)), np.empty((m, 3))
     if pos1 is None:

@@ -114,3 +114,60 @@ def pairs_ccd(pos0, dpos, edges, pairs, edge_radius, min_gap_fraction, tol, max_
             tau_min = tau
             worst = p
     return tau_min, worst, total
+
+
+@njit(cache=True)
+def step_reach(dpos, slack, out):
+    """Each node's reach over a step pos0 -> pos0 + dpos: its displacement |dpos_i| (any fraction of the step
+    moves it less), widened by 1e-9 relative and ``slack`` (a length, above the coordinates' rounding) so that a
+    trial rounded onto the step stays within it."""
+    for i in range(dpos.shape[0]):
+        s = 0.0
+        for k in range(3):
+            s += dpos[i, k] * dpos[i, k]
+        out[i] = np.sqrt(s) * (1.0 + 1e-9) + slack
+
+
+@njit(cache=True)
+def within_reach(pos, pos0, reach):
+    """True if every node i of pos lies within reach[i] of pos0 (Euclidean)."""
+    for i in range(pos.shape[0]):
+        s = 0.0
+        for k in range(3):
+            s += (pos[i, k] - pos0[i, k]) ** 2
+        if s > reach[i] * reach[i]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def reach_pairs(pos0, reach, edges, pairs, edge_radius, dhat):
+    """The rows of pairs (n_pairs, 2) whose gap can fall below dhat while every node i stays within reach[i] of
+    pos0 -- the pair list of a whole step, whose every trial (any fraction of it) moves node i by at most its
+    reach. The bound is this module's: a point of a segment is a convex combination of its endpoints, so it moves
+    by at most its endpoints' largest displacement, and the distance of two segments by at most the sum of their
+    two largest displacements: gap >= gap(pos0) - max(reach_a0, reach_a1) - max(reach_b0, reach_b1). A pair left
+    out keeps gap >= dhat on every such state; ``pairs`` must hold every pair that can come within dhat there
+    (a broad phase with the boxes inflated by the reach)."""
+    keep = np.zeros(pairs.shape[0], dtype=np.bool_)
+    x = np.empty(12)
+    n = 0
+    for p in range(pairs.shape[0]):
+        ea, eb = pairs[p, 0], pairs[p, 1]
+        a0, a1, b0, b1 = edges[ea, 0], edges[ea, 1], edges[eb, 0], edges[eb, 1]
+        nodes = (a0, a1, b0, b1)
+        for k in range(4):
+            for i in range(3):
+                x[3 * k + i] = pos0[nodes[k], i]
+        move = max(reach[a0], reach[a1]) + max(reach[b0], reach[b1])
+        if np.sqrt(segment_distance2(x)) - edge_radius[ea] - edge_radius[eb] - move < dhat:
+            keep[p] = True
+            n += 1
+    out = np.empty((n, 2), dtype=np.int64)
+    q = 0
+    for p in range(pairs.shape[0]):
+        if keep[p]:
+            out[q, 0] = pairs[p, 0]
+            out[q, 1] = pairs[p, 1]
+            q += 1
+    return out

@@ -39,6 +39,9 @@ EXACT_CONTACT_BELOW = 1e-4
 # while its bandwidth kl + ku stays at most this (measured: LAPACK's banded LU beats splu up to about 2 x 60)
 BANDED_CONTACT = True
 BANDED_CONTACT_MAX_WIDTH = 120
+# contact: the reordered band factorised by LAPACK's banded Cholesky (a quarter of dgbsv's flops; refined against
+# the whole matrix, dgbsv where that is refused: der/contact/reorder.py); False: dgbsv always, as before
+CONTACT_CHOLESKY = True
 FLOOR_STALL_ITERATIONS = 2      # enough once the residual is down at the round-off floor
 # pseudo-time step reductions (x0.1 each) before a step is declared impossible: enough to go from Newton's
 # method (dt up to 1e30) down to a step that only damps (dt ~ 1e-10); 12 near the round-off floor
@@ -390,7 +393,7 @@ def _contact_solve(system, work, coo, R):
         vals.append(v[keep])
     rows, cols, vals = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
     if BANDED_CONTACT:
-        from ..contact.reorder import banded_solve, bandwidths, block_order
+        from ..contact.reorder import BandCholesky, banded_solve, bandwidths, block_order
 
         # the contact pattern changes little from one Newton step to the next: keep the last ordering while the
         # pattern's bandwidth in it stays within 1.25x of what RCM gave when it was computed
@@ -406,7 +409,12 @@ def _contact_solve(system, work, coo, R):
             system.contact_order = (newpos, kl2 + ku2)
         if kl2 + ku2 <= BANDED_CONTACT_MAX_WIDTH:
             system.linear_solves["sparse"] += 1
-            return banded_solve(work, system.kl, system.ku, system.perm, rows, cols, vals, R, newpos, kl2, ku2)
+            chol = None
+            if CONTACT_CHOLESKY:
+                chol = getattr(system, "contact_cholesky", None)
+                if chol is None:
+                    chol = system.contact_cholesky = BandCholesky()
+            return banded_solve(work, system.kl, system.ku, system.perm, rows, cols, vals, R, newpos, kl2, ku2, chol)
     rb, cb, vb = band_to_coo(work, system.kl, system.ku, system.perm)
     rows, cols, vals = np.concatenate([rb, rows]), np.concatenate([cb, cols]), np.concatenate([vb, vals])
     A = sp.csc_matrix((vals, (rows, cols)), shape=(n, n))

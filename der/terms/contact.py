@@ -20,6 +20,9 @@ KAPPA_RANGE = 100.0          # kappa_max / kappa_min
 # broad phase: candidate pairs are listed within dhat + VERLET_MARGIN r and reused while every node stays within
 # half that margin of where the list was built (a Verlet list; docs/contact.md, "Fewer broad phases")
 VERLET_MARGIN = 1.0
+# one pair list per Newton step, for all its line-search trials (BoundSelfContact.step_candidates); False: the
+# Verlet list for every trial, as before (kept for the side-by-side benchmark, tools/bench_contact_newton.py)
+STEP_LIST = True
 # b''(dhat / 2) / 1 for the GAP barrier: (q + 2) q - 2 log(1/q) - 3 at q = zh / z = 2
 _B2_HALF = 8.0 + 2.0 * math.log(2.0) - 3.0
 
@@ -224,6 +227,7 @@ class BoundBarrier:
 
 class BoundSelfContact(BoundBarrier):
     couples_dofs = True
+    _step = None              # (positions, reach per node, pairs) of the last step (step_candidates)
     samples = None            # sample points per edge (der/contact/sampled.py), None: segment distances
     pair_range_extra = 0.0    # the broad phase lists edge pairs within dhat + this
 
@@ -272,12 +276,18 @@ class BoundSelfContact(BoundBarrier):
         self._init_samples(term.samples, [rod])
 
     def candidates(self, pos, pos1=None):
-        """Pairs that may be within dhat at pos (and, with pos1, anywhere on the straight step pos -> pos1).
+        """Pairs that may be within dhat at pos (and, with pos1, anywhere on the straight step pos -> pos1): the
+        list of the last step (``step_candidates``) while pos lies within its reach -- every line-search trial of
+        that step and the state it accepts -- else the Verlet list below.
 
         A pair left out of a list built at x0 within dhat + margin had its boxes (inflated by r + (dhat +
         margin) / 2) apart, so a gap > dhat + margin at x0; while every node stays within margin / 2 of x0 each
         segment moves by at most margin / 2, the gap stays > dhat, and, the distance from x0 being convex along
         a straight step, that holds on the whole step if it holds at both of its ends."""
+        if pos1 is None and self._step is not None:
+            x0, reach, pairs = self._step
+            if self.C.within_reach(pos, x0, reach):
+                return pairs
         if self._list is not None:
             x0, pairs = self._list
             move = float(np.abs(pos - x0).max())
@@ -292,6 +302,46 @@ class BoundSelfContact(BoundBarrier):
         pairs = self.C.candidate_pairs(pos, self.topo, self.dhat + self.pair_range_extra + self.margin)
         self._list = (pos.copy(), pairs)
         return pairs if pos1 is None else self.candidates(pos, pos1)
+
+    def step_candidates(self, pos, dpos, ccd=True):
+        """The pair list of one Newton step pos -> pos + dpos, built once and reused by all its line-search trials
+        (``candidates``): every pair whose gap can come within range (dhat, plus the sampled barrier's extra) on
+        any state whose node i stays within reach_i = |dpos_i| of pos -- so on every fraction of the step. Filtered
+        from a list that holds all such pairs (the Verlet list while the whole reach stays inside its margin, else
+        a broad phase with the boxes inflated by the reach) by the CCD's distance bound (der/contact/ccd.py
+        ``reach_pairs``: gap >= gap(pos) - the two edges' largest reaches). A pair left out keeps its gap above
+        the range on the whole step: no barrier, no contact, no CCD needed.
+
+        Returns (pairs, listed). A step beyond the Verlet margin, with ``ccd``: the CCD's candidates from the boxes
+        swept over it (tighter than the reach along a straight step) and listed False -- ``max_step`` then lists
+        the step's CCD-safe part only (a Newton step far from equilibrium can be long and cut to a small fraction,
+        and the trials never go beyond it)."""
+        if not STEP_LIST:
+            return self.candidates(pos, pos + dpos), False
+        C = self.C
+        rng = self.dhat + self.pair_range_extra
+        reach = np.empty(pos.shape[0])
+        C.step_reach(dpos, 1e-13 * (1.0 + float(np.abs(pos).max())), reach)
+        wide = None
+        if self._list is not None:
+            x0, pairs = self._list
+            room = 0.5 * self.margin - reach
+            if float(room.min()) >= 0.0 and C.within_reach(pos, x0, room):
+                wide = pairs
+        if wide is None and 2.0 * float(reach.max()) <= self.margin:
+            # a short step: a new Verlet list at pos holds it (and, likely, the next steps)
+            self.broad_phases += 1
+            wide = C.candidate_pairs(pos, self.topo, rng + self.margin)
+            self._list = (pos.copy(), wide)
+        if wide is None:
+            self.broad_phases += 1
+            if ccd:
+                return C.candidate_pairs(pos, self.topo, rng, pos1=pos + dpos), False
+            # a long step: boxes inflated by the reach (not kept)
+            wide = C.candidate_pairs(pos, self.topo, rng, reach=reach)
+        pairs = C.reach_pairs(pos, reach, self.topo.edges, wide, self.topo.edge_radius, rng)
+        self._step = (pos.copy(), reach, pairs)
+        return pairs, True
 
     def check_start(self, state, tight_bend="refuse"):
         curvature_radius_check(self.rod, state, self.radius, "der.self_contact", tight_bend)
@@ -382,7 +432,7 @@ class BoundSelfContact(BoundBarrier):
     def max_step(self, state, delta):
         pos = self.positions(state)
         dpos = np.ascontiguousarray(delta.reshape(-1, 4)[:self.n_nodes, :3])
-        pairs = self.candidates(pos, pos + dpos)
+        pairs, listed = self.step_candidates(pos, dpos)
         tau, worst, _ = self.C.pairs_ccd(pos, dpos, self.topo.edges, pairs, self.topo.edge_radius, MIN_GAP_FRACTION,
                                          1e-6, 10000)
         self.ccd_pair = (int(pairs[worst, 0]), int(pairs[worst, 1])) if tau < 1.0 and worst >= 0 else None
@@ -391,6 +441,11 @@ class BoundSelfContact(BoundBarrier):
             tau_s, _ = self.S.sampled_ccd(pos, dpos, self.topo.edges, pairs, self.topo.edge_radius, self.edge_len,
                                           self.owns_end, self.samples, MIN_GAP_FRACTION)
             tau = min(tau, tau_s)
+        if STEP_LIST and not listed and 0.0 < 2.0 * tau * float(np.sqrt((dpos * dpos).sum(axis=1)).max()) <= self.margin:
+            # a long step cut short by the CCD: the trials' list for its CCD-safe part [0, tau] (the line search
+            # starts at most there), if that fits in the Verlet margin; else the trials use the Verlet list, as
+            # before (measured: a list for the reach of a long step holds many more pairs than one at the trial)
+            self.step_candidates(pos, tau * dpos, ccd=False)
         return float(tau)
 
     def _min_curvature_radius(self, state):
@@ -403,7 +458,8 @@ class BoundSelfContact(BoundBarrier):
     def diagnostics(self, state):
         """Pairs in contact (gap < dhat), their gaps, forces (-kappa b'(gap), force units), forces per length
         (over the pair's mean rest edge length), contact points, and the smallest centreline distance over all
-        non-neighbour pairs (brute force up to 4000 edges, else over pairs within 4r)."""
+        non-neighbour pairs (over the pairs a broad phase finds within 4r; if none is that close, brute force up to
+        4000 edges)."""
         pos = self.positions(state)
         topo = self.topo
         pairs = self.C.candidate_pairs(pos, topo, self.dhat + self.pair_range_extra)
@@ -419,14 +475,16 @@ class BoundSelfContact(BoundBarrier):
         pairs, gap, force, pa, pb = pairs[keep], gap[keep], force[keep], pa[keep], pb[keep]
         l_bar = self.rod.l_bar
         per_length = force / (0.5 * (l_bar[pairs[:, 0]] + l_bar[pairs[:, 1]])) if pairs.size else force
-        if topo.edges.shape[0] <= 4000:
+        # the pairs within 4r by the broad phase (a superset of those with gap < 4r, in the brute force's order):
+        # if one is, the smallest gap is among them; else brute force up to 4000 edges (O(n^2))
+        near = self.C.candidate_pairs(pos, topo, 4.0 * self.radius)
+        near = near[np.lexsort((near[:, 1], near[:, 0]))]
+        g = self._pair_data(pos, near)[0] if near.size else np.array([np.inf])
+        p = int(np.argmin(g))
+        g_min, ea, eb = (float(g[p]), *near[p]) if near.size else (np.inf, -1, -1)
+        if not g_min < 4.0 * self.radius and topo.edges.shape[0] <= 4000:
             g_min, ea, eb = self.A.min_pair_gap(pos, topo.edges, topo.rod_of_edge, topo.local_edge, topo.rod_n_edges,
                                                 topo.rod_closed, topo.rod_k, topo.edge_radius)
-        else:
-            near = self.C.candidate_pairs(pos, topo, 4.0 * self.radius)
-            g, *_ = self._pair_data(pos, near) if near.size else (np.array([np.inf]),)
-            p = int(np.argmin(g))
-            g_min, ea, eb = (float(g[p]), *near[p]) if near.size else (np.inf, -1, -1)
         return {
             "kind": "self_contact", "radius": self.radius, "dhat": self.dhat, "kappa": self.kappa,
             "n_contacts": int(pairs.shape[0]), "pairs": pairs.tolist(), "gap": gap.tolist(), "force": force.tolist(),

@@ -394,3 +394,76 @@ def add_transport_jacobian(q, edge_nodes, dE_dtheta, ab, kl, ku, perm, E=None):
                 B[3 + r, s] = -B[r, s]
         edge_dofs(edge_nodes, j, dofs)
         scatter_band(ab, kl, ku, perm, dofs, B, 1.0)
+
+
+@njit(cache=True)
+def rod_topology(n_edges, closed):
+    """``(edge_nodes, vertex_nodes, vertex_edges)`` (int64) of an open rod or a ring with ``n_edges`` edges, in one
+    pass (``rod.topology``; bitwise the NumPy construction it replaced, ``tests/test_setup.py``)."""
+    n_nodes = n_edges if closed else n_edges + 1
+    nv = n_edges if closed else n_edges - 1
+    edge_nodes = np.empty((n_edges, 2), dtype=np.int64)
+    for j in range(n_edges):
+        edge_nodes[j, 0] = j
+        edge_nodes[j, 1] = (j + 1) % n_nodes
+    vertex_nodes = np.empty((nv, 3), dtype=np.int64)
+    vertex_edges = np.empty((nv, 2), dtype=np.int64)
+    for i in range(nv):
+        v = i if closed else i + 1          # a ring's vertex v sits at node v, an open rod's at nodes 1..n-1
+        vertex_nodes[i, 0] = (v - 1) % n_nodes
+        vertex_nodes[i, 1] = v
+        vertex_nodes[i, 2] = (v + 1) % n_nodes
+        vertex_edges[i, 0] = (v - 1) % n_edges
+        vertex_edges[i, 1] = v
+    return edge_nodes, vertex_nodes, vertex_edges
+
+
+@njit(cache=True, error_model="numpy")   # a coincident pair of nodes gives a nan tangent, refused by the caller
+def shape_edges(x, edge_nodes, vertex_edges):
+    """The edges of a shape's node positions ``x`` (n_nodes, 3), in one pass, for ``rod_from_shape``:
+    ``(le, t, finite, scale, j_min, v_min, cos_min)`` -- edge lengths ``|e|``, unit tangents ``e / |e|`` (the same
+    operations, bitwise, as ``np.linalg.norm(e, axis=1)`` and ``e / le[:, None]``), whether every coordinate is
+    finite, ``max(max |x|, max |e|)``, the shortest edge (first index), and the vertex with the smallest cosine
+    of its turning angle ``t_e . t_f`` with that cosine (the checks for coincident nodes and folds). With a
+    non-finite coordinate only ``finite`` (False) is meaningful."""
+    n = edge_nodes.shape[0]
+    le = np.empty(n)
+    t = np.empty((n, 3))
+    finite = True
+    xmax = 0.0
+    for i in range(x.shape[0]):
+        for k in range(3):
+            a = abs(x[i, k])
+            if not a < np.inf:
+                finite = False
+            if a > xmax:
+                xmax = a
+    if not finite:
+        return le, t, False, np.nan, 0, -1, np.nan
+    lmax = 0.0
+    j_min = 0
+    for j in range(n):
+        a = edge_nodes[j, 0]
+        b = edge_nodes[j, 1]
+        e0 = x[b, 0] - x[a, 0]
+        e1 = x[b, 1] - x[a, 1]
+        e2 = x[b, 2] - x[a, 2]
+        lj = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        le[j] = lj
+        t[j, 0] = e0 / lj
+        t[j, 1] = e1 / lj
+        t[j, 2] = e2 / lj
+        if lj > lmax:
+            lmax = lj
+        if lj < le[j_min]:
+            j_min = j
+    v_min = -1
+    cos_min = np.inf
+    for v in range(vertex_edges.shape[0]):
+        e = vertex_edges[v, 0]
+        f = vertex_edges[v, 1]
+        c = t[e, 0] * t[f, 0] + t[e, 1] * t[f, 1] + t[e, 2] * t[f, 2]
+        if c < cos_min:
+            cos_min = c
+            v_min = v
+    return le, t, True, max(xmax, lmax), j_min, v_min, cos_min

@@ -166,7 +166,8 @@ class Rod:
         ke = np.asarray(self.kappa_bar_edges, float)
         if ke.shape != (kb.shape[0], 2, 2):
             raise ValueError(f"Rod.kappa_bar_edges must have shape ({kb.shape[0]}, 2, 2); got {ke.shape}")
-        if np.abs(ke.mean(axis=1) - kb).max(initial=0.0) > 1e-12 * max(1.0, np.abs(kb).max(initial=0.0)):
+        # (the mean over the two sides without ndarray.mean's strided reduction: 10 ms at 10^5 edges, every solve)
+        if np.abs((ke[:, 0] + ke[:, 1]) / 2.0 - kb).max(initial=0.0) > 1e-12 * max(1.0, np.abs(kb).max(initial=0.0)):
             raise ValueError("Rod.kappa_bar disagrees with the mean of Rod.kappa_bar_edges (was kappa_bar replaced "
                              "alone?); set natural curvatures with Rod.with_natural(kappa_bar=...)")
         return np.ascontiguousarray(ke)

@@ -300,3 +300,28 @@ def test_implicit_assembles_the_band_only_for_steps():
     assert np.array_equal(a.state.q, b.state.q)
     assert assemblies[True] == a.linear_solves["band"]
     assert assemblies[False] > assemblies[True]
+
+
+@pytest.mark.parametrize("closed", [False, True])
+def test_scatter_band_is_the_reference_scatter(closed):
+    """stencils.scatter_band (unsigned band indices, issue 17) adds exactly what the plain indexed scatter adds:
+    bitwise the same band, on consecutive DOFs (the dense block) and on a ring's wrapped stencil."""
+    from der.linalg import band_layout, new_band
+    from der.stencils import scatter_band, vertex_dofs
+
+    rod = der.rod_from_shape(der.shapes.ring(1.0, 12) if closed else der.shapes.arc(1.0, 2.0, 12), 1.0, 1.5)
+    kl, ku, perm = band_layout(rod.n_nodes, rod.closed)
+    ab = new_band(rod.n_dof, kl, ku)
+    ref = np.zeros_like(ab)
+    rng = np.random.default_rng(7)
+    dofs = np.empty(11, dtype=np.int64)
+    for v in range(rod.n_vertices):
+        H = rng.standard_normal((11, 11))
+        vertex_dofs(rod.vertex_nodes, rod.vertex_edges, v, dofs)
+        scatter_band(ab, kl, ku, perm, dofs, H, 1.0)
+        for a in range(11):
+            for b in range(11):
+                i, j = perm[dofs[a]], perm[dofs[b]]
+                ref[kl + ku + i - j, j] += H[a, b]
+    assert ab.tobytes() == ref.tobytes()
+    assert np.count_nonzero(ab) > 0

@@ -102,8 +102,15 @@ def edge_array(q, edge_nodes, q_lo=None, lo=False):
     exact ``(q_b - q_a) + (lo_b - lo_a)`` minus the rounded edge (TwoSum): what the kernels need to form the
     curvature and the elongation without cancellation (``stencils.curvature_binormal_of``,
     ``stencils.elongation``). Every kernel reads columns 0-2 as the edge."""
+    return edge_array_into(q, edge_nodes, q_lo, lo, np.empty((edge_nodes.shape[0], 6 if lo else 3)))
+
+
+@njit(cache=True)
+def edge_array_into(q, edge_nodes, q_lo, lo, out):
+    """``edge_array`` written into ``out`` (n_edges, 3 or more columns; with ``lo`` at least 6), returned: a
+    solver's work array reused across evaluations instead of a fresh one per call (issue 17). Columns beyond
+    those ``edge_array`` fills are left as they are."""
     n = edge_nodes.shape[0]
-    out = np.empty((n, 6 if lo else 3))
     for j in range(n):
         a = 4 * edge_nodes[j, 0]
         b = 4 * edge_nodes[j, 1]
@@ -209,15 +216,17 @@ def material_frames(q, t, d1):
 
 
 @njit(cache=True)
-def edge_frames(q, edge_nodes, d1, E=None):
+def edge_frames(q, edge_nodes, d1, E=None, out=None):
     """Per-edge data shared by the bending and twisting kernels, shape (n_edges, 16):
     ``[t (3), |e|, m1 (3), m2 (3), e (3), e_lo (3)]`` -- one pass, one sine and cosine per edge. The edges are
     ``E`` (``edge_array``) when given, else formed from ``q`` (with their low parts, as ``edge_array(q, ...,
     lo=True)``); ``e_lo`` is the low part of the edge (columns 3-5 of a 6-column ``E``, else 0), from which the
     kernels form the curvature binormal without cancellation (``stencils.curvature_binormal_of``). The angles
-    theta always come from ``q``."""
+    theta always come from ``q``. ``out``: a (n_edges, 16) work array to fill and return (a solver's, reused
+    across evaluations), else a new one."""
     n = edge_nodes.shape[0]
-    out = np.empty((n, 16))
+    if out is None:
+        out = np.empty((n, 16))
     Ee = edge_array(q, edge_nodes, None, True) if E is None else E
     for j in range(n):
         e0 = Ee[j, 0]

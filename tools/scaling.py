@@ -181,6 +181,8 @@ def single(problem, n, time_budget=120.0, trace=True):
            "s_per_iteration": s_per_iteration, "dgbsv_s": t_dgbsv,
            # CPU seconds of the solve (user, system): on a shared machine wall time also counts other processes
            "solve_cpu_user_s": cpu1.ru_utime - cpu0.ru_utime, "solve_cpu_system_s": cpu1.ru_stime - cpu0.ru_stime,
+           # page faults during the solve (minor: a fresh page of memory touched for the first time)
+           "solve_minor_faults": cpu1.ru_minflt - cpu0.ru_minflt, "solve_major_faults": cpu1.ru_majflt - cpu0.ru_majflt,
            "per_iteration_ratio_to_dgbsv": s_per_iteration / t_dgbsv,
            # the same ratio in CPU time (the solve's user + system time per iteration against dgbsv's): on a
            # loaded machine wall time also counts the waits for a core, which fall unevenly on the two
@@ -469,7 +471,12 @@ def million(args):
               f"one dgbsv {r['dgbsv_s']:.3f} s, per iteration {r['per_iteration_ratio_to_dgbsv']:.2f} x dgbsv "
               f"({r['per_iteration_cpu_ratio_to_dgbsv']:.2f} x in CPU time)")
         print(f"  CPU time of the solve: user {r['solve_cpu_user_s']:.2f} s, system {r['solve_cpu_system_s']:.2f} s "
-              f"(system time: page faults, the first touch of the band's pages and of temporaries)")
+              f"(system time: page faults, the first touch of the band's pages and of temporaries); "
+              f"{r['solve_minor_faults']} minor page faults")
+        print(f"  set-up: shape + rod + initial state {r['setup_s']:.2f} s ({r['setup_cpu_s']:.2f} s CPU; rod_from_shape "
+              f"{r['rod_cpu_s']:.2f} s CPU), der.solve's preparation {r['presolve_s']:.2f} s ({r['presolve_cpu_s']:.2f} s "
+              f"CPU), to the first iteration {r['setup_to_first_iteration_s']:.2f} s "
+              f"({r['setup_to_first_iteration_cpu_s']:.2f} s CPU)")
         print(f"  peak RSS {r['peak_rss_mb']:.0f} MB (growth over the compiled process {r['rss_growth_mb']:.0f} MB, "
               f"{r['rss_per_edge_kb']:.2f} kB per edge)")
     else:

@@ -197,8 +197,9 @@ Plan = namedtuple("Plan", [
     "has_follower", "follower_density", "follower_first", "follower_second",
     "has_follower_torques", "follower_torque_edges", "follower_torque_vectors",
     # work arrays of ``evaluate``, allocated once per plan and reused by every evaluation: the edges with their
-    # low parts (n_edges, 6), the per-edge frames (n_edges, 16) and dE/dtheta (n_edges,). Fresh arrays per call
-    # were page-faulted on every evaluation at 10^6 edges (176 MB each time, issue 17)
+    # low parts (n_edges, 6; a view of columns 10-15 of the next), the per-edge frames (n_edges, 16) and
+    # dE/dtheta (n_edges,). Fresh arrays per call were page-faulted on every evaluation at 10^6 edges (176 MB each
+    # time, issue 17)
     "work_E", "work_ed", "work_dE",
 ])
 
@@ -258,6 +259,9 @@ def make_plan(scene, k_stretch):
     if not rod.closed:
         w_first[0] = 0.0
         w_second[-1] = 0.0
+    # the edges with their low parts are columns 10-15 of the edge frames (edge_frames copies them there): one
+    # work array for both, 48 bytes per edge less at the peak of a solve
+    work_ed = np.empty((rod.n_edges, 16))
     return Plan(
         "stretch" in scene.energies, "bend" in scene.energies, "twist" in scene.energies,
         rod.edge_nodes, rod.vertex_nodes, rod.vertex_edges,
@@ -269,7 +273,7 @@ def make_plan(scene, k_stretch):
         np.zeros(len(COUNTER_NAMES), dtype=np.int64),
         has_follower, follower, w_first, w_second,
         len(ft_edges) > 0, np.array(ft_edges, dtype=np.int64), np.array(ft_vecs, dtype=float).reshape(-1, 3),
-        np.empty((rod.n_edges, 6)), np.empty((rod.n_edges, 16)), np.empty(rod.n_edges),
+        work_ed[:, 10:16], work_ed, np.empty(rod.n_edges),
     )
 
 

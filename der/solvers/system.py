@@ -351,10 +351,12 @@ def residual_vector(system, out=None):
 def residual_norm(system, R, scales, per_length=False):
     """max_i |R_i| / S_i (the convergence measure), or per unit length with ``per_length``."""
     F_s, M_s = scales
-    if not per_length:      # one pass, no temporaries: bitwise max(|R| / where(is_theta, M_s, F_s))
+    if not per_length and np.ndim(F_s) == 0 and np.ndim(M_s) == 0:
+        # one rod's scales: one pass, no temporaries, bitwise max(|R| / where(is_theta, M_s, F_s))
         return float(_scaled_max(R, system.is_theta, float(F_s), float(M_s))) if R.size else 0.0
-    s = np.where(system.is_theta, M_s, F_s)
-    s = s * system.weights
+    s = np.where(system.is_theta, M_s, F_s)      # (several rods: scales per DOF)
+    if per_length:
+        s = s * system.weights
     return float(np.max(np.abs(R) / s)) if R.size else 0.0
 
 

@@ -3,6 +3,7 @@ memory of the implicit solver from n = 100 to 100,000 edges (and a million with 
 
     python tools/scaling.py [--json] [--n 100 1000 10000 100000] [--png PATH]
     python tools/scaling.py --million [--json]
+    python tools/scaling.py --setup [--n ...] [--json]     (the set-up alone: no solve)
 
 Two problems: ring torsion (scenarios/ring_torsion.py: an arc clamped at one end, end torque; solved from the
 rest state) and helix winding (scenarios/helix_winding.py: 200 edges per turn, so n/200 turns, both ends clamped
@@ -12,7 +13,10 @@ peak RSS over the process baseline after compilation (``rss_growth_mb``, per edg
 process peak (``peak_rss_mb``) and the peak of Python/NumPy allocations (tracemalloc, in a second short solve).
 
 Reported per run (a JSON row with ``--json``): ``problem``, ``n``, ``converged``, ``status``, ``residual``,
-``tol``, iterations, ``solve_s``, ``setup_s`` (shape, rod and initial state), ``s_per_iteration``, ``dgbsv_s``
+``tol``, iterations, ``solve_s``, ``setup_s`` (shape, rod and initial state; the scenario module and its scipy
+import are loaded before the timer), ``rod_s`` (``rod_from_shape`` alone), ``presolve_s`` (``der.solve`` up to its
+first Newton iteration), ``setup_to_first_iteration_s`` (their sum), each also in CPU time (``*_cpu_s``),
+``solve_minor_faults`` (page faults of the solve), ``s_per_iteration``, ``dgbsv_s``
 (one LAPACK banded factor-and-solve of the same Newton matrix, timed in the same process after the solve, best
 of 3 -- the iterations are averages, so on a shared machine the ratio leans against der: the floor of a Newton
 iteration) and ``per_iteration_ratio_to_dgbsv``, the same in CPU time (``dgbsv_cpu_s``,

@@ -102,8 +102,15 @@ def edge_array(q, edge_nodes, q_lo=None, lo=False):
     exact ``(q_b - q_a) + (lo_b - lo_a)`` minus the rounded edge (TwoSum): what the kernels need to form the
     curvature and the elongation without cancellation (``stencils.curvature_binormal_of``,
     ``stencils.elongation``). Every kernel reads columns 0-2 as the edge."""
+    return edge_array_into(q, edge_nodes, q_lo, lo, np.empty((edge_nodes.shape[0], 6 if lo else 3)))
+
+
+@njit(cache=True)
+def edge_array_into(q, edge_nodes, q_lo, lo, out):
+    """``edge_array`` written into ``out`` (n_edges, 3 or more columns; with ``lo`` at least 6), returned: a
+    solver's work array reused across evaluations instead of a fresh one per call (issue 17). Columns beyond
+    those ``edge_array`` fills are left as they are."""
     n = edge_nodes.shape[0]
-    out = np.empty((n, 6 if lo else 3))
     for j in range(n):
         a = 4 * edge_nodes[j, 0]
         b = 4 * edge_nodes[j, 1]
@@ -209,15 +216,17 @@ def material_frames(q, t, d1):
 
 
 @njit(cache=True)
-def edge_frames(q, edge_nodes, d1, E=None):
+def edge_frames(q, edge_nodes, d1, E=None, out=None):
     """Per-edge data shared by the bending and twisting kernels, shape (n_edges, 16):
     ``[t (3), |e|, m1 (3), m2 (3), e (3), e_lo (3)]`` -- one pass, one sine and cosine per edge. The edges are
     ``E`` (``edge_array``) when given, else formed from ``q`` (with their low parts, as ``edge_array(q, ...,
     lo=True)``); ``e_lo`` is the low part of the edge (columns 3-5 of a 6-column ``E``, else 0), from which the
     kernels form the curvature binormal without cancellation (``stencils.curvature_binormal_of``). The angles
-    theta always come from ``q``."""
+    theta always come from ``q``. ``out``: a (n_edges, 16) work array to fill and return (a solver's, reused
+    across evaluations), else a new one."""
     n = edge_nodes.shape[0]
-    out = np.empty((n, 16))
+    if out is None:
+        out = np.empty((n, 16))
     Ee = edge_array(q, edge_nodes, None, True) if E is None else E
     for j in range(n):
         e0 = Ee[j, 0]
@@ -394,3 +403,76 @@ def add_transport_jacobian(q, edge_nodes, dE_dtheta, ab, kl, ku, perm, E=None):
                 B[3 + r, s] = -B[r, s]
         edge_dofs(edge_nodes, j, dofs)
         scatter_band(ab, kl, ku, perm, dofs, B, 1.0)
+
+
+@njit(cache=True)
+def rod_topology(n_edges, closed):
+    """``(edge_nodes, vertex_nodes, vertex_edges)`` (int64) of an open rod or a ring with ``n_edges`` edges, in one
+    pass (``rod.topology``; bitwise the NumPy construction it replaced, ``tests/test_setup.py``)."""
+    n_nodes = n_edges if closed else n_edges + 1
+    nv = n_edges if closed else n_edges - 1
+    edge_nodes = np.empty((n_edges, 2), dtype=np.int64)
+    for j in range(n_edges):
+        edge_nodes[j, 0] = j
+        edge_nodes[j, 1] = (j + 1) % n_nodes
+    vertex_nodes = np.empty((nv, 3), dtype=np.int64)
+    vertex_edges = np.empty((nv, 2), dtype=np.int64)
+    for i in range(nv):
+        v = i if closed else i + 1          # a ring's vertex v sits at node v, an open rod's at nodes 1..n-1
+        vertex_nodes[i, 0] = (v - 1) % n_nodes
+        vertex_nodes[i, 1] = v
+        vertex_nodes[i, 2] = (v + 1) % n_nodes
+        vertex_edges[i, 0] = (v - 1) % n_edges
+        vertex_edges[i, 1] = v
+    return edge_nodes, vertex_nodes, vertex_edges
+
+
+@njit(cache=True, error_model="numpy")   # a coincident pair of nodes gives a nan tangent, refused by the caller
+def shape_edges(x, edge_nodes, vertex_edges):
+    """The edges of a shape's node positions ``x`` (n_nodes, 3), in one pass, for ``rod_from_shape``:
+    ``(le, t, finite, scale, j_min, v_min, cos_min)`` -- edge lengths ``|e|``, unit tangents ``e / |e|`` (the same
+    operations, bitwise, as ``np.linalg.norm(e, axis=1)`` and ``e / le[:, None]``), whether every coordinate is
+    finite, ``max(max |x|, max |e|)``, the shortest edge (first index), and the vertex with the smallest cosine
+    of its turning angle ``t_e . t_f`` with that cosine (the checks for coincident nodes and folds). With a
+    non-finite coordinate only ``finite`` (False) is meaningful."""
+    n = edge_nodes.shape[0]
+    le = np.empty(n)
+    t = np.empty((n, 3))
+    finite = True
+    xmax = 0.0
+    for i in range(x.shape[0]):
+        for k in range(3):
+            a = abs(x[i, k])
+            if not a < np.inf:
+                finite = False
+            if a > xmax:
+                xmax = a
+    if not finite:
+        return le, t, False, np.nan, 0, -1, np.nan
+    lmax = 0.0
+    j_min = 0
+    for j in range(n):
+        a = edge_nodes[j, 0]
+        b = edge_nodes[j, 1]
+        e0 = x[b, 0] - x[a, 0]
+        e1 = x[b, 1] - x[a, 1]
+        e2 = x[b, 2] - x[a, 2]
+        lj = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        le[j] = lj
+        t[j, 0] = e0 / lj
+        t[j, 1] = e1 / lj
+        t[j, 2] = e2 / lj
+        if lj > lmax:
+            lmax = lj
+        if lj < le[j_min]:
+            j_min = j
+    v_min = -1
+    cos_min = np.inf
+    for v in range(vertex_edges.shape[0]):
+        e = vertex_edges[v, 0]
+        f = vertex_edges[v, 1]
+        c = t[e, 0] * t[f, 0] + t[e, 1] * t[f, 1] + t[e, 2] * t[f, 2]
+        if c < cos_min:
+            cos_min = c
+            v_min = v
+    return le, t, True, max(xmax, lmax), j_min, v_min, cos_min

@@ -16,7 +16,7 @@ from .energies.bend import bend_energy, bend_gradient, bend_hessian
 from .energies.stretch import stretch_energy, stretch_gradient, stretch_hessian
 from .energies.twist import twist_energy, twist_gradient, twist_hessian
 from .energies.vertex import bend_twist_hessian, stretch_bend_twist_gradient, stretch_bend_twist_hessian
-from .geometry import add_transport_jacobian, edge_array, edge_frames
+from .geometry import add_transport_jacobian, edge_array_into, edge_frames
 from .linalg import zero_band
 from .loads import (
     DistributedForce, EndForce, EndTorque, FollowerForce, PointForce, PointTorque, TwistingMoment, add_dead_torques,
@@ -196,6 +196,11 @@ Plan = namedtuple("Plan", [
     "counters",
     "has_follower", "follower_density", "follower_first", "follower_second",
     "has_follower_torques", "follower_torque_edges", "follower_torque_vectors",
+    # work arrays of ``evaluate``, allocated once per plan and reused by every evaluation: the edges with their
+    # low parts (n_edges, 6; a view of columns 10-15 of the next), the per-edge frames (n_edges, 16) and
+    # dE/dtheta (n_edges,). Fresh arrays per call were page-faulted on every evaluation at 10^6 edges (176 MB each
+    # time, issue 17)
+    "work_E", "work_ed", "work_dE",
 ])
 
 
@@ -254,6 +259,9 @@ def make_plan(scene, k_stretch):
     if not rod.closed:
         w_first[0] = 0.0
         w_second[-1] = 0.0
+    # the edges with their low parts are columns 10-15 of the edge frames (edge_frames copies them there): one
+    # work array for both, 48 bytes per edge less at the peak of a solve
+    work_ed = np.empty((rod.n_edges, 16))
     return Plan(
         "stretch" in scene.energies, "bend" in scene.energies, "twist" in scene.energies,
         rod.edge_nodes, rod.vertex_nodes, rod.vertex_edges,
@@ -265,6 +273,7 @@ def make_plan(scene, k_stretch):
         np.zeros(len(COUNTER_NAMES), dtype=np.int64),
         has_follower, follower, w_first, w_second,
         len(ft_edges) > 0, np.array(ft_edges, dtype=np.int64), np.array(ft_vecs, dtype=float).reshape(-1, 3),
+        work_ed[:, 10:16], work_ed, np.empty(rod.n_edges),
     )
 
 
@@ -284,7 +293,7 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
     ``F``, ``M``: with order 1 and all three terms, filled with ``diagnostics._edge_forces`` of the state (the
     solver's load scale) in the same pass; untouched otherwise (check ``edge_forces_in_pass``).
     """
-    E = edge_array(q, plan.edge_nodes, q_lo, True)   # with their low parts (curvature, elongation)
+    E = edge_array_into(q, plan.edge_nodes, q_lo, True, plan.work_E)   # with their low parts (curvature, elongation)
     grad[:] = 0.0
     fext[:] = 0.0
     if order >= 2:
@@ -304,7 +313,7 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
         else:
             energy += stretch_energy(q, plan.edge_nodes, plan.l_bar, plan.k_stretch, lam, E)
     if plan.has_bend or (plan.has_twist and order >= 1):
-        ed = edge_frames(q, plan.edge_nodes, d1, E)   # one pass over edges, shared by bending and twisting
+        ed = edge_frames(q, plan.edge_nodes, d1, E, plan.work_ed)   # one pass over edges, bending and twisting
     else:
         ed = np.empty((0, 16))
     if full:
@@ -358,7 +367,7 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
     if order >= 2 and (plan.has_bend or plan.has_twist):
         plan.counters[3] += 1
         n_edges = plan.edge_nodes.shape[0]
-        dE_dtheta = np.empty(n_edges)
+        dE_dtheta = plan.work_dE
         for j in range(n_edges):
             dE_dtheta[j] = grad[4 * j + 3]
         add_transport_jacobian(q, plan.edge_nodes, dE_dtheta, ab, kl, ku, perm, E)

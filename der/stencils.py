@@ -300,16 +300,21 @@ def scatter_band(ab, kl, ku, perm, dofs, H, scale):
         if perm[dofs[a]] != base + a:
             contiguous = False
             break
+    # The band row off + i - j of every entry is in [0, 2 kl + ku] by construction (the solver's kl, ku cover
+    # every stencil: |i - j| <= kl, ku), so the indices are passed unsigned: numba then drops its per-entry test
+    # for a negative index (wraparound), which sat in the innermost loop (issue 17; bitwise the same band,
+    # tests/test_scale.py).
     if contiguous:
         # an open rod's stencils are consecutive DOFs: a dense block, no index lookups in the inner loop
         for b in range(m):
             r0 = off - b
-            j = base + b
+            j = np.uint64(base + b)
             for a in range(m):
-                ab[r0 + a, j] += scale * H[a, b]
+                ab[np.uint64(r0 + a), j] += scale * H[a, b]
         return
     for b in range(m):
         j = perm[dofs[b]]
+        col = np.uint64(j)
         for a in range(m):
             i = perm[dofs[a]]
-            ab[off + i - j, j] += scale * H[a, b]
+            ab[np.uint64(off + i - j), col] += scale * H[a, b]

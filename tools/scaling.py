@@ -3,6 +3,7 @@ memory of the implicit solver from n = 100 to 100,000 edges (and a million with 
 
     python tools/scaling.py [--json] [--n 100 1000 10000 100000] [--png PATH]
     python tools/scaling.py --million [--json]
+    python tools/scaling.py --setup [--n ...] [--json]     (the set-up alone: no solve)
 
 Two problems: ring torsion (scenarios/ring_torsion.py: an arc clamped at one end, end torque; solved from the
 rest state) and helix winding (scenarios/helix_winding.py: 200 edges per turn, so n/200 turns, both ends clamped
@@ -12,7 +13,10 @@ peak RSS over the process baseline after compilation (``rss_growth_mb``, per edg
 process peak (``peak_rss_mb``) and the peak of Python/NumPy allocations (tracemalloc, in a second short solve).
 
 Reported per run (a JSON row with ``--json``): ``problem``, ``n``, ``converged``, ``status``, ``residual``,
-``tol``, iterations, ``solve_s``, ``setup_s`` (shape, rod and initial state), ``s_per_iteration``, ``dgbsv_s``
+``tol``, iterations, ``solve_s``, ``setup_s`` (shape, rod and initial state; the scenario module and its scipy
+import are loaded before the timer), ``rod_s`` (``rod_from_shape`` alone), ``presolve_s`` (``der.solve`` up to its
+first Newton iteration), ``setup_to_first_iteration_s`` (their sum), each also in CPU time (``*_cpu_s``),
+``solve_minor_faults`` (page faults of the solve), ``s_per_iteration``, ``dgbsv_s``
 (one LAPACK banded factor-and-solve of the same Newton matrix, timed in the same process after the solve, best
 of 3 -- the iterations are averages, so on a shared machine the ratio leans against der: the floor of a Newton
 iteration) and ``per_iteration_ratio_to_dgbsv``, the same in CPU time (``dgbsv_cpu_s``,
@@ -156,14 +160,14 @@ def single(problem, n, time_budget=120.0, trace=True):
     import der
 
     compile_s = der.warmup()
+    hw = _scenario_module()     # (scipy's import is not part of the set-up)
     base_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    t0 = time.perf_counter()
-    scene, state, error = _problem(problem, n)
-    setup_s = time.perf_counter() - t0
+    scene, state, error, setup_times = _timed_setup(problem, n, hw)
     from der.linalg import BAND_SOLVES
     BAND_SOLVES.update({k: 0 for k in BAND_SOLVES})    # count this solve's only (not the warm-up's)
     cpu0 = resource.getrusage(resource.RUSAGE_SELF)
     with _loop_cpu_time() as loop_cpu:
+        t_call, c_call = time.perf_counter(), time.process_time()
         res = der.solve(scene, state=state, stability=False, raise_on_failure=False,
                         options=der.SolverOptions(time_budget=time_budget, tol=TOL))
     cpu1 = resource.getrusage(resource.RUSAGE_SELF)
@@ -173,10 +177,16 @@ def single(problem, n, time_budget=120.0, trace=True):
     start = state if state is not None else scene.rod.rest_state()
     t_dgbsv, floor, noise = dgbsv_seconds(scene, res.state, start)
     out = {"problem": problem, "n": n, "converged": res.converged, "status": res.status, "tol": TOL,
-           "iterations": res.iterations, "solve_s": res.wall_time, "setup_s": setup_s,
+           "iterations": res.iterations, "solve_s": res.wall_time, **setup_times,
+           # der.solve's preparation before its first iteration (system, band, working state, checks)
+           "presolve_s": loop_cpu["wall_start"] - t_call, "presolve_cpu_s": loop_cpu["start"] - c_call,
+           "setup_to_first_iteration_s": setup_times["setup_s"] + loop_cpu["wall_start"] - t_call,
+           "setup_to_first_iteration_cpu_s": setup_times["setup_cpu_s"] + loop_cpu["start"] - c_call,
            "s_per_iteration": s_per_iteration, "dgbsv_s": t_dgbsv,
            # CPU seconds of the solve (user, system): on a shared machine wall time also counts other processes
            "solve_cpu_user_s": cpu1.ru_utime - cpu0.ru_utime, "solve_cpu_system_s": cpu1.ru_stime - cpu0.ru_stime,
+           # page faults during the solve (minor: a fresh page of memory touched for the first time)
+           "solve_minor_faults": cpu1.ru_minflt - cpu0.ru_minflt, "solve_major_faults": cpu1.ru_majflt - cpu0.ru_majflt,
            "per_iteration_ratio_to_dgbsv": s_per_iteration / t_dgbsv,
            # the same ratio in CPU time (the solve's user + system time per iteration against dgbsv's): on a
            # loaded machine wall time also counts the waits for a core, which fall unevenly on the two
@@ -201,10 +211,12 @@ def single(problem, n, time_budget=120.0, trace=True):
 
 
 @contextlib.contextmanager
-def _loop_cpu_time():
+def _loop_cpu_time(stop=None):
     """Process CPU seconds of the implicit solver over the interval its ``wall_time`` covers: from the entry of
     ``solve_implicit`` to the entry of its last ``final_result`` (the system's setup before and the result's
-    diagnostics after are not counted, as in ``wall_time``). Yields a dict whose "s" is set on exit."""
+    diagnostics after are not counted, as in ``wall_time``). Yields a dict whose "s" is set on exit, and
+    "start"/"wall_start" (process and wall clock at the entry of ``solve_implicit``: the first iteration).
+    ``stop``: an exception class raised there instead of solving (``--setup``)."""
     from der.solvers import implicit
 
     marks = {"s": float("nan")}
@@ -212,6 +224,9 @@ def _loop_cpu_time():
 
     def solve_implicit(*args, **kwargs):
         marks["start"] = time.process_time()
+        marks["wall_start"] = time.perf_counter()
+        if stop is not None:
+            raise stop()
         return orig_solve(*args, **kwargs)
 
     def final_result(*args, **kwargs):
@@ -227,17 +242,35 @@ def _loop_cpu_time():
             marks["s"] = marks["end"] - marks["start"]
 
 
-def _problem(problem, n):
-    """(scene, initial state or None, error(state) against the closed form) of one benchmark problem."""
+def _scenario_module():
+    """scenarios/helix_winding.py as a module (it imports scipy: loaded before any timer starts)."""
     import importlib.util
 
+    spec = importlib.util.spec_from_file_location("hw", os.path.join(HERE, "..", "scenarios", "helix_winding.py"))
+    hw = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hw)
+    return hw
+
+
+def _problem(problem, n, times=None, hw=None):
+    """(scene, initial state or None, error(state) against the closed form) of one benchmark problem. ``times``
+    (a dict) receives ``rod_s`` and ``rod_cpu_s``: wall and CPU seconds of ``rod_from_shape`` alone; ``hw``: the
+    helix scenario's module (``_scenario_module()``, loaded outside the timed setup)."""
     import der
     from der import closed_forms as cf
     from der import diagnostics as dg
 
+    times = {} if times is None else times
+
+    def build_rod(shape, A1, A2):
+        t0, c0 = time.perf_counter(), time.process_time()
+        rod = der.rod_from_shape(shape, A1, A2)
+        times["rod_s"], times["rod_cpu_s"] = time.perf_counter() - t0, time.process_time() - c0
+        return rod
+
     if problem == "ring_torsion":
         A1, A2, a0, L, T = 1.0, 1.0 / 0.67, 1.0, 3.0, 1e-3
-        rod = der.rod_from_shape(der.shapes.arc(a0, L, n), A1, A2)
+        rod = build_rod(der.shapes.arc(a0, L, n), A1, A2)
         scene = der.Scene(rod, loads=[der.end_torque(T * cf.ring_end_basis(a0, L)[0])],
                           constraints=[der.clamp("start")])
         ref = cf.ring_end_rotation(A1, A2, a0, L, T)
@@ -245,11 +278,9 @@ def _problem(problem, n):
         def error(state):
             return float(np.linalg.norm(dg.end_motion(rod, state)[1] - ref) / np.linalg.norm(ref))
         return scene, None, error
-    spec = importlib.util.spec_from_file_location("hw", os.path.join(HERE, "..", "scenarios", "helix_winding.py"))
-    hw = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(hw)
+    hw = _scenario_module() if hw is None else hw
     lam, eta, phi, A = 0.6, 1.2, 0.1, 0.67
-    rod = der.rod_from_shape(der.shapes.helix(1.0, lam, n / 200, n), A, 1.0)
+    rod = build_rod(der.shapes.helix(1.0, lam, n / 200, n), A, 1.0)
     scene = der.Scene(rod, constraints=[der.clamp("start"), der.clamp("end")])
     ref = np.array([cf.winding_P0(eta, phi, lam, A), cf.winding_T0(eta, phi, lam, A)])
 
@@ -257,6 +288,50 @@ def _problem(problem, n):
         m = hw.measure(rod, state, lam)
         return float(np.linalg.norm(np.array([m["P0"], m["T0"]]) - ref) / np.linalg.norm(ref))
     return scene, hw.deformed_state(rod, eta, phi, lam), error
+
+
+def _timed_setup(problem, n, hw):
+    """``_problem`` timed: (scene, state, error, times) with ``setup_s``/``setup_cpu_s`` (shape, rod and initial
+    state; the scenario module and its scipy import are loaded before) and ``rod_s``/``rod_cpu_s``."""
+    times = {}
+    t0, c0 = time.perf_counter(), time.process_time()
+    scene, state, error = _problem(problem, n, times, hw)
+    times["setup_s"], times["setup_cpu_s"] = time.perf_counter() - t0, time.process_time() - c0
+    return scene, state, error, times
+
+
+class _FirstIteration(Exception):
+    """Raised at the entry of the implicit solver by ``--setup``: the set-up is measured, the solve not run."""
+
+
+def setup_only(problem, n, repeat=3):
+    """Set-up alone (``--setup``), in this process after compilation: shape, rod and initial state (``setup_s``,
+    ``rod_s``) and der.solve's own preparation up to the first Newton iteration (``presolve_s``: the system,
+    band, working state and the pre-solve checks), wall and CPU seconds; the first run (what a script sees: fresh
+    memory) and the best of ``repeat`` more (``*_best_*``)."""
+    import der
+
+    der.warmup()
+    hw = _scenario_module()
+    runs = []
+    for _ in range(1 + repeat):
+        scene, state, _, times = _timed_setup(problem, n, hw)
+        with _loop_cpu_time(stop=_FirstIteration) as loop:
+            t0, c0 = time.perf_counter(), time.process_time()
+            try:
+                der.solve(scene, state=state, stability=False, raise_on_failure=False,
+                          options=der.SolverOptions(tol=TOL))
+            except _FirstIteration:
+                pass
+        times["presolve_s"], times["presolve_cpu_s"] = loop["wall_start"] - t0, loop["start"] - c0
+        times["setup_to_first_iteration_s"] = times["setup_s"] + times["presolve_s"]
+        times["setup_to_first_iteration_cpu_s"] = times["setup_cpu_s"] + times["presolve_cpu_s"]
+        runs.append(times)
+        del scene, state
+    out = {"problem": problem, "n": n, **runs[0]}
+    for k in runs[0]:
+        out[k[:-2] + "_best_s"] = min(r[k] for r in runs[1:])
+    return out
 
 
 def fit(rows, key):
@@ -275,6 +350,9 @@ def main(argv=None):
     ap.add_argument("--png", default=None)
     ap.add_argument("--million", action="store_true",
                     help="only the 10^6-edge helix between clamps: solve time, peak RSS and the split of the time")
+    ap.add_argument("--setup", action="store_true",
+                    help="only the set-up: shape, rod (rod_from_shape) and initial state, and der.solve's preparation up "
+                         "to the first Newton iteration, each (problem, n) in a fresh process; no solve")
     ap.add_argument("--single", nargs=2, metavar=("PROBLEM", "N"), help=argparse.SUPPRESS)
     ap.add_argument("--from-json", default=None, metavar="JSON",
                     help="only re-plot --png from the saved output of --json (no solve)")
@@ -297,6 +375,11 @@ def main(argv=None):
             text = fh.read().strip().splitlines()
         _plot(json.loads(text[-1])["rows"], args.png)   # the last line of a --json run
         return
+    if args.single and args.setup:
+        print(json.dumps(setup_only(args.single[0], int(args.single[1]))))
+        return
+    if args.setup:
+        return setup_table(args)
     if args.single:
         print(json.dumps(single(args.single[0], int(args.single[1]), time_budget=args.time_budget,
                                 trace=not args.no_trace)))
@@ -348,6 +431,31 @@ def main(argv=None):
         print(json.dumps({"machine": platform.machine(), "rows": rows, "fits": fits}))
 
 
+def setup_table(args):
+    """``--setup``: the set-up times of each (problem, n), each in a fresh process."""
+    rows = []
+    for problem in args.problems:
+        for n in args.n:
+            out = subprocess.run([sys.executable, __file__, "--single", problem, str(n), "--setup"],
+                                 capture_output=True, text=True)
+            try:
+                rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
+            except (ValueError, IndexError):
+                rows.append({"problem": problem, "n": n, "status": "crashed", "message": out.stderr.strip()[-300:]})
+    print("set-up, CPU ms (first run in a fresh process / best of 3 more): rod_from_shape, shape + rod + initial "
+          "state, der.solve's preparation, all to the first Newton iteration; wall ms of the last")
+    print(f"{'problem':<14} {'n':>8} {'rod':>15} {'setup':>15} {'presolve':>15} {'to 1st iteration':>17} {'wall':>8}")
+    for r in rows:
+        if "setup_s" not in r:
+            print(f"{r['problem']:<14} {r['n']:>8}  {r['status']}: {r['message']}")
+            continue
+        cell = lambda k: f"{1e3 * r[k + '_cpu_s']:.1f} / {1e3 * r[k + '_cpu_best_s']:.1f}"   # noqa: E731
+        print(f"{r['problem']:<14} {r['n']:>8} {cell('rod'):>15} {cell('setup'):>15} {cell('presolve'):>15} "
+              f"{cell('setup_to_first_iteration'):>17} {1e3 * r['setup_to_first_iteration_s']:>8.1f}")
+    if args.json:
+        print(json.dumps({"machine": platform.machine(), "setup_rows": rows}))
+
+
 def million(args):
     """The 10^6-edge helix (stretched and overwound between clamps) in a fresh process."""
     out = subprocess.run([sys.executable, __file__, "--single", "helix_winding", "1000000", "--no-trace",
@@ -367,7 +475,12 @@ def million(args):
               f"one dgbsv {r['dgbsv_s']:.3f} s, per iteration {r['per_iteration_ratio_to_dgbsv']:.2f} x dgbsv "
               f"({r['per_iteration_cpu_ratio_to_dgbsv']:.2f} x in CPU time)")
         print(f"  CPU time of the solve: user {r['solve_cpu_user_s']:.2f} s, system {r['solve_cpu_system_s']:.2f} s "
-              f"(system time: page faults, the first touch of the band's pages and of temporaries)")
+              f"(system time: page faults, the first touch of the band's pages and of temporaries); "
+              f"{r['solve_minor_faults']} minor page faults")
+        print(f"  set-up: shape + rod + initial state {r['setup_s']:.2f} s ({r['setup_cpu_s']:.2f} s CPU; rod_from_shape "
+              f"{r['rod_cpu_s']:.2f} s CPU), der.solve's preparation {r['presolve_s']:.2f} s ({r['presolve_cpu_s']:.2f} s "
+              f"CPU), to the first iteration {r['setup_to_first_iteration_s']:.2f} s "
+              f"({r['setup_to_first_iteration_cpu_s']:.2f} s CPU)")
         print(f"  peak RSS {r['peak_rss_mb']:.0f} MB (growth over the compiled process {r['rss_growth_mb']:.0f} MB, "
               f"{r['rss_per_edge_kb']:.2f} kB per edge)")
     else:

@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from ..geometry import add_compensated
-from ..linalg import add_diagonal, band_solve, band_to_coo, dot, dot_abs
+from ..linalg import add_diagonal, band_solve, band_to_coo, dot, dot_difference
 from .system import (
     FLOOR_FACTOR, INTERRUPTS, constrain_system, constraint_residual, energy_terms, evaluate_forces, evaluate_system,
     expand, final_result, floor_forces, floor_verdict, is_interrupt, load_scales, max_strain, multiplier_update,
@@ -124,8 +124,10 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     ab_K = work = None
     n_dof = system.ab.shape[1]
     fext = np.empty(n_dof)          # the loads at ``state`` (the line search's evaluations overwrite system.fext)
-    q_trial = np.empty(n_dof)
-    step = np.empty(n_dof)
+    q_trial = np.empty(n_dof)       # (only a state without low parts touches it)
+    # work arrays reused by every iteration (issue 17: at 10^6 edges fresh n-sized arrays were page-faulted on
+    # each use): the residual, the damping diagonal, the round-off forces (their rounding scale formed in place)
+    R_work, diag_work, round_off_work = (np.empty(n_dof) for _ in range(3))
     # contact: exact (unprojected) barrier Hessian in Newton's end game: below a residual the terms set (a smooth
     # barrier, der/contact/sampled.py, sets infinity: exact from the start, the projected one only as a fallback)
     exact_below = max([getattr(t, "exact_hessian_below", EXACT_CONTACT_BELOW) for t in system.terms],
@@ -178,7 +180,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 best, since_best, potential_best = np.inf, 0, potential
             if edge is not None:
                 np.subtract(system.fext, system.grad, out=f_node)
-            R = residual_vector(system)
+            R = residual_vector(system, R_work)
             scales = load_scales(system, state, forces)
             residual = residual_norm(system, R, scales)
             strain = max_strain(system, state) if rod.inextensible else 0.0
@@ -238,7 +240,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 if ab_K is None:
                     ab_K, work = np.empty_like(system.ab), np.empty_like(system.ab)
                 ab_K[:] = system.ab
-            diag = np.abs(system.ab[kl + ku, :][perm])
+            diag = np.abs(np.take(system.ab[kl + ku, :], perm, out=diag_work), out=diag_work)
             coo = system.contact_coo            # off-band contact Hessian triplets (empty: banded path)
             if coo:
                 cd = _coo_diagonal(coo, diag.size)
@@ -246,7 +248,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 diag += np.maximum(cd, 0.0) if exact_below == np.inf else cd
             diag[diag == 0] = 1.0
             fext[:] = system.fext
-            round_off = floor_forces(system, state)
+            round_off = floor_forces(system, state, round_off_work)
             # edge coordinates: K_e read off the band at ``state`` once (the band is not factorised in place: every
             # attempt below reuses it)
             use_edge = edge is not None and edge.prepare(system.ab, kl, ku)
@@ -333,11 +335,11 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 break
             # the progress measure uses the step actually taken (q + a delta rounded), not a delta: at the floor a
             # step can round back and forth between two states and credit the load work a fext.delta each time
-            np.subtract(trial.q, state.q, out=step)
-            change = e_trial - energy - dot(fext, step)
+            # (dot products with the step trial.q - state.q formed on the fly: no n-sized step array, issue 17)
+            change = e_trial - energy - dot_difference(fext, trial.q, state.q)
             potential += change
             descent = max(-change, 0.0)
-            noise = dot_abs(round_off, step)
+            noise = dot_difference(round_off, trial.q, state.q, True)
             state.copy_from(trial)
             total_descent += descent
             if system.contact_coo and a == 1.0 and dt >= options.dt_max and residual < exact_below:

@@ -25,7 +25,7 @@ from numba import njit
 from ..constraints import NO_LINKS, apply_targets, build_links, enforce_links, refresh_links
 from ..diagnostics import _edge_forces
 from ..energies.stretch import elongations
-from ..geometry import edge_array, edge_frames, transport_frames
+from ..geometry import edge_array, edge_array_into, edge_frames, transport_frames
 from ..linalg import BandLDLT, band_layout, band_matvec, condense_band, condense_vector, constrain_band, dot, expand_step, new_band
 from ..loads import DistributedForce, EndForce, EndTorque, FollowerForce, PointForce, PointTorque, TwistingMoment
 from ..scene import COUNTER_NAMES, edge_forces_in_pass, evaluate, make_plan
@@ -300,8 +300,8 @@ def contact_force_scale(system):
 
 
 def _edges_within_supports(system):
-    """Per edge, True when both its nodes are held by the supports (every position coordinate fixed or a
-    dependent of the end supports' links); cached for the system's current ``fixed`` and ``links``."""
+    """The edges whose two nodes are both held by the supports (every position coordinate fixed or a dependent of
+    the end supports' links), as indices; cached for the system's current ``fixed`` and ``links``."""
     key = (id(system.fixed), id(system.links))
     cached = getattr(system, "_held_edges", None)
     if cached is not None and cached[0] == key:
@@ -310,7 +310,7 @@ def _edges_within_supports(system):
     held_dof = system.fixed.copy()
     held_dof[system.links.dep] = True
     node = held_dof.reshape(-1, 4)[:, :3].all(axis=1)
-    edges = node[rod.edge_nodes[:, 0]] & node[rod.edge_nodes[:, 1]]
+    edges = np.flatnonzero(node[rod.edge_nodes[:, 0]] & node[rod.edge_nodes[:, 1]])
     system._held_edges = (key, edges)
     return edges
 
@@ -330,14 +330,16 @@ def load_scales(system, state, forces=None):
                             rod.vertex_edges, rod.l_bar, plan.k_stretch, plan.kappa_bar, rod.twist_bar, plan.weld,
                             rod.voronoi, plan.A1, plan.A2, plan.has_stretch, plan.has_bend, plan.has_twist,
                             state.q_lo)
+    # an edge between two held nodes (a clamp's end edge) carries the support's reaction couple as a pair of forces
+    # +-M/h: a moment, counted in m_int, not a force scale. Counted as one, it made F_s grow like n M / L, and a
+    # clamped cantilever under a small tip load "converged" 13 % off at n = 20,000
+    # (tests/test_verdicts.py::test_a_clamps_reaction_couple_does_not_set_the_force_scale). Those few rows are
+    # zeroed for the maximum and put back (F may be a solver's work array; no copy of it at 10^6 edges).
     held = _edges_within_supports(system)
-    if held.any():
-        # an edge between two held nodes (a clamp's end edge) carries the support's reaction couple as a pair of
-        # forces +-M/h: a moment, counted in m_int, not a force scale. Counted as one, it made F_s grow like
-        # n M / L, and a clamped cantilever under a small tip load "converged" 13 % off at n = 20,000
-        # (tests/test_verdicts.py::test_a_clamps_reaction_couple_does_not_set_the_force_scale)
-        F = F[~held]
+    kept = F[held].copy()
+    F[held] = 0.0
     f_int = float(max_row_norm(F)) if F.size else 0.0
+    F[held] = kept
     m_int = float(M.max()) if M.size else 0.0
     L = rod.length
     # internal forces no larger than their own round-off (rounding every edge by eps |e| -- compensated
@@ -364,18 +366,37 @@ def load_scales(system, state, forces=None):
     return max(F_raw, M_raw / L), max(M_raw, F_raw * L)
 
 
-def residual_vector(system):
-    """R = T^T (f_ext - dE/dq) on the free DOFs (zero on held ones), from the last evaluation."""
-    return condense_forces(system, system.fext - system.grad)
+def residual_vector(system, out=None):
+    """R = T^T (f_ext - dE/dq) on the free DOFs (zero on held ones), from the last evaluation; written into
+    ``out`` when given (a solver's work array, issue 17), else a new array."""
+    if out is None:
+        return condense_forces(system, system.fext - system.grad)
+    return condense_forces(system, np.subtract(system.fext, system.grad, out=out))
 
 
 def residual_norm(system, R, scales, per_length=False):
     """max_i |R_i| / S_i (the convergence measure), or per unit length with ``per_length``."""
     F_s, M_s = scales
-    s = np.where(system.is_theta, M_s, F_s)
+    if not per_length and np.ndim(F_s) == 0 and np.ndim(M_s) == 0:
+        # one rod's scales: one pass, no temporaries, bitwise max(|R| / where(is_theta, M_s, F_s))
+        return float(_scaled_max(R, system.is_theta, float(F_s), float(M_s))) if R.size else 0.0
+    s = np.where(system.is_theta, M_s, F_s)      # (several rods: scales per DOF)
     if per_length:
         s = s * system.weights
     return float(np.max(np.abs(R) / s)) if R.size else 0.0
+
+
+@njit(cache=True)
+def _scaled_max(R, is_theta, F_s, M_s):
+    """max_i |R_i| / (M_s if is_theta[i] else F_s), NaN propagating as in np.max (``residual_norm``)."""
+    m = abs(R[0]) / (M_s if is_theta[0] else F_s)
+    for i in range(1, R.shape[0]):
+        v = abs(R[i]) / (M_s if is_theta[i] else F_s)
+        if v > m or v != v:
+            m = v
+            if v != v:
+                return v
+    return m
 
 
 # rounding steps an edge passes through before it becomes a force (the edge itself, its length, the unit tangent,
@@ -386,7 +407,7 @@ def residual_norm(system, R, scales, per_length=False):
 FLOOR_ROUNDINGS = 4.0
 
 
-def rounding_scale(system, state):
+def rounding_scale(system, state, out=None):
     """Per DOF, the size of the rounding the force evaluation sees (length units for node DOFs, radians for
     angles): a node's positions enter only through the edges beside it (``geometry.edge_array``), each formed from
     compensated coordinates and so rounded at its own length -- the longest edge at the node --, an angle at its
@@ -398,14 +419,41 @@ def rounding_scale(system, state):
         w = np.maximum(np.abs(state.q), float(rod.l_bar.max()))
         w[3::4] = np.maximum(np.abs(state.q[3::4]), 1.0)
         return FLOOR_ROUNDINGS * w
-    le = np.sqrt((state_edges(system, state) ** 2).sum(axis=1))
-    w = np.repeat(_node_edge_max(le, rod.edge_nodes, rod.n_nodes), 4)
-    theta = np.abs(state.q[3::4])
-    w[3::4] = np.maximum(theta, 1.0)
-    twist = np.abs(state.reference_twist)
-    if twist.size:      # the reference twist is added to the angle differences unwrapped
-        w[4 * rod.vertex_edges[:, 1] + 3] = np.maximum(w[4 * rod.vertex_edges[:, 1] + 3], twist)
-    return FLOOR_ROUNDINGS * w
+    # one kernel pass into ``out`` (or a new array), the edges in the plan's work array: bitwise the NumPy
+    # expressions it replaced (|e| summed (x^2 + y^2) + z^2, the node maximum, np.maximum's NaN rule), without
+    # their seven n-sized temporaries (issue 17; tests/test_scale.py keeps them as the reference)
+    E = edge_array_into(state.q, rod.edge_nodes, state.q_lo, False, system.plan.work_E)
+    w = np.empty(rod.n_dof) if out is None else out
+    _rounding_scale_into(E, rod.edge_nodes, rod.vertex_edges, state.q, state.reference_twist, rod.n_nodes,
+                         FLOOR_ROUNDINGS, w)
+    return w
+
+
+@njit(cache=True)
+def _rounding_scale_into(E, edge_nodes, vertex_edges, q, reference_twist, n_nodes, factor, w):
+    """``rounding_scale`` of a state with low parts, into ``w``: per node the longest edge on it (columns 0-2 of
+    ``E``), per angle max(|theta|, 1) and, where a vertex's reference twist enters, max(that, |twist|); times
+    ``factor``."""
+    node = np.zeros(n_nodes)
+    for j in range(edge_nodes.shape[0]):
+        v = np.sqrt((E[j, 0] * E[j, 0] + E[j, 1] * E[j, 1]) + E[j, 2] * E[j, 2])
+        for s in range(2):
+            k = edge_nodes[j, s]
+            if v > node[k] or v != v:
+                node[k] = v
+    for k in range(n_nodes):
+        for i in range(4):
+            w[4 * k + i] = node[k]
+    for k in range(n_nodes):
+        a = abs(q[4 * k + 3])
+        w[4 * k + 3] = a if (a > 1.0 or a != a) else 1.0          # np.maximum(|theta|, 1.0)
+    for v in range(vertex_edges.shape[0]):
+        i = 4 * vertex_edges[v, 1] + 3
+        t = abs(reference_twist[v])
+        if t > w[i] or t != t:                                      # np.maximum(w, |twist|)
+            w[i] = t
+    for i in range(w.shape[0]):
+        w[i] = factor * w[i]
 
 
 @njit(cache=True)
@@ -422,18 +470,23 @@ def _node_edge_max(le, edge_nodes, n_nodes):
     return node
 
 
-def floor_forces(system, state):
+def floor_forces(system, state, out=None):
     """eps |K| w per DOF (force units, zero on held DOFs): a bound on the generalized force change from the
     rounding of the state as the kernels see it, ``w = rounding_scale`` (each edge rounded at its own length, each
-    angle at its size). Needs ``system.ab`` evaluated at ``state``.
+    angle at its size). Needs ``system.ab`` evaluated at ``state``. ``out``: an n_dof work array for the result (a
+    solver's, reused; w is formed in it first), else a new one.
 
     (Before compensated coordinates, w was |q|: every coordinate rounded at its distance from the origin, a
     floor growing like eps n^3 A1 / (L^2 P) on a rod of fixed length, issue 17.)"""
-    out = np.empty(system.n_dof)
-    band_matvec(system.ab, system.kl, system.ku, system.perm, rounding_scale(system, state), out, True)
+    if out is None:
+        out = np.empty(system.n_dof)
+        w = rounding_scale(system, state)
+    else:     # w formed in ``out`` itself: band_matvec reads its x (permuted into its own array) before it writes
+        w = rounding_scale(system, state, out)
+    band_matvec(system.ab, system.kl, system.ku, system.perm, w, out, True)
     lk = system.links
     condense_vector(out, lk.tri_dep, lk.tri_master, np.abs(lk.tri_coef), system.fixed)
-    return np.finfo(float).eps * out
+    return np.multiply(np.finfo(float).eps, out, out=out)
 
 
 def residual_floor(system, state, scales):
@@ -702,7 +755,9 @@ def state_edges(system, state, lo=False):
 def state_elongations(system, state):
     """g_j = |e_j| - l_j of ``state``'s edges (compensated positions)."""
     rod = system.rod
-    return elongations(state.q, rod.edge_nodes, rod.l_bar, state_edges(system, state, lo=True))
+    # the edges in the plan's work array (not a fresh (n_edges, 6) array per call, issue 17)
+    E = edge_array_into(state.q, rod.edge_nodes, state.q_lo, True, system.plan.work_E)
+    return elongations(state.q, rod.edge_nodes, rod.l_bar, E)
 
 
 def max_strain(system, state):
@@ -770,8 +825,10 @@ def transport(system, base, q_new, out):
     if out is not base:
         out.lam[:] = base.lam
     try:
+        # the edges in the plan's work array (columns 0-2; transport_frames reads no more)
+        E = edge_array_into(out.q, rod.edge_nodes, out.q_lo, False, system.plan.work_E)
         ok = transport_frames(out.q, rod.edge_nodes, rod.vertex_edges, base.tangents, base.d1, base.reference_twist,
-                              out.tangents, out.d1, out.reference_twist, state_edges(system, out))
+                              out.tangents, out.d1, out.reference_twist, E)
     except ZeroDivisionError:
         # a director transported onto its own tangent (a step that turned an edge by ~pi, or a vanishing edge):
         # a failed step like a reversed edge, not an exception out of the solve

@@ -25,11 +25,11 @@ import time
 import numpy as np
 
 from ..geometry import add_compensated
-from ..linalg import add_diagonal, band_solve, band_to_coo, dot, dot_abs
+from ..linalg import add_diagonal, band_resolve, band_solve, band_to_coo, dot, dot_abs
 from .system import (
-    FLOOR_FACTOR, INTERRUPTS, constrain_system, constraint_residual, energy_terms, evaluate_forces, evaluate_system,
-    expand, final_result, floor_forces, floor_verdict, is_interrupt, load_scales, max_strain, multiplier_update,
-    residual_floor, residual_norm, residual_vector, transport,
+    FLOOR_FACTOR, INTERRUPTS, condense_forces, constrain_system, constraint_residual, energy_terms, evaluate_forces,
+    evaluate_system, expand, final_result, floor_forces, floor_verdict, is_interrupt, load_scales, max_strain,
+    multiplier_update, residual_floor, residual_norm, residual_vector, state_edges, transport,
 )
 
 STALL_ITERATIONS = 6
@@ -46,6 +46,29 @@ MAX_SHRINKS = 40
 # the band path factorises the Jacobian in place (False: copy it before each attempt, as the contact path does;
 # kept for the test that both end bitwise the same)
 IN_PLACE = True
+
+
+def second_order_correction(system, state, delta, in_place):
+    """The correction c of a Newton step ``delta`` for the chord error of its straight line: K c = -J^T (k g2),
+    g2 the elongation the step adds to each edge beyond its linearisation (``stretch.chord_excess_forces``),
+    solved with the factors of the matrix that gave ``delta`` (``linalg.band_resolve``: no new factorisation),
+    on the free variables and expanded to q. Along q + a delta + a^2 c the edges keep their lengths to third
+    order in a where the straight line stretches them at second order. None if there is nothing to correct or
+    no factors to reuse."""
+    from ..energies.stretch import chord_excess_forces
+
+    if not in_place:
+        return None
+    rhs = np.empty(system.n_dof)
+    worst = chord_excess_forces(state_edges(system, state), system.rod.edge_nodes, delta, system.plan.k_stretch,
+                                rhs)
+    if not worst > 0.0:
+        return None
+    condense_forces(system, rhs)
+    c = band_resolve(system.ab, system.kl, system.ku, system.perm, rhs, getattr(system, "ldlt", None))
+    if c is None or not np.all(np.isfinite(c)):
+        return None
+    return expand(system, c)
 
 
 def shrink(dt, options):
@@ -104,6 +127,10 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     fext = np.empty(n_dof)          # the loads at ``state`` (the line search's evaluations overwrite system.fext)
     q_trial = np.empty(n_dof)
     step = np.empty(n_dof)
+    direction_buf = None
+    # the second-order correction of a refused full step (SolverOptions.second_order_correction): band path only
+    soc = (options.second_order_correction and not system.terms and system.parts is None
+           and bool(system.plan.has_stretch))
     # contact: exact (unprojected) barrier Hessian in Newton's end game: below a residual the terms set (a smooth
     # barrier, der/contact/sampled.py, sets infinity: exact from the start, the projected one only as a fallback)
     exact_below = max([getattr(t, "exact_hessian_below", EXACT_CONTACT_BELOW) for t in system.terms],
@@ -252,22 +279,43 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                         continue
                 a_start = a
                 t_phase = time.perf_counter()
-                for _ls in range(options.line_search_steps):
+                arc = None          # the second-order correction c: the search then runs along q + a delta + a^2 c
+                ls = 0
+                while ls < options.line_search_steps:
+                    if arc is None:
+                        direction = delta
+                        scale = a
+                    else:           # the step a delta + a^2 c, added to q as one compensated step
+                        np.multiply(arc, a, out=direction)
+                        direction += delta
+                        direction *= a
+                        scale = 1.0
                     if getattr(state, "q_lo", None) is not None and getattr(trial, "q_lo", None) is not None:
-                        add_compensated(state.q, state.q_lo, a, delta, trial.q, trial.q_lo)
+                        add_compensated(state.q, state.q_lo, scale, direction, trial.q, trial.q_lo)
                         q_new = trial.q
                     else:       # a state without low parts (prepared elsewhere): plain coordinates
-                        np.multiply(delta, a, out=q_trial)
+                        np.multiply(direction, scale, out=q_trial)
                         q_trial += state.q
                         q_new = q_trial
                     if transport(system, state, q_new, trial):
                         e_trial = evaluate_system(system, trial, 0)
-                        merit = e_trial - energy - a * dot(fext, delta)
+                        merit = e_trial - energy - scale * dot(fext, direction)
                         slack = 1e-13 * (abs(energy) + abs(e_trial)) + 1e-300
                         if np.isfinite(e_trial) and merit <= -options.armijo * a * slope + slack:
                             accepted = True
                             break
+                    if arc is None and ls == 0 and soc:
+                        # the full step was refused: correct it for the chord error of the edges it turns and
+                        # try the full step again along the arc (one solve with the same factors)
+                        arc = second_order_correction(system, state, delta, in_place)
+                        if arc is not None:
+                            system.linear_solves["second_order"] = system.linear_solves.get("second_order", 0) + 1
+                            if direction_buf is None:
+                                direction_buf = np.empty(n_dof)
+                            direction = direction_buf
+                            continue
                     a *= 0.5
+                    ls += 1
                 timings["line_search"] += time.perf_counter() - t_phase
                 if accepted or exact_contact:
                     break

@@ -28,6 +28,11 @@ class SolverOptions:
     newton_first : start with Newton's method (dt at its cap) and fall back to dt0 when its step does not lower
         the energy; False starts every solve at dt0.
     line_search_steps, armijo : backtracking halvings per pseudo-time step and the sufficient-decrease factor.
+    second_order_correction : implicit solver, rods with a stretching term, no contact: when the line search
+        refuses a full step, correct it for the elongation that the straight-line step adds to the edges it
+        turns beyond its linearisation (the chord error |d_perp|^2 / 2h, priced by the axial stiffness: the
+        Maratos effect that stalls Newton's method on a fine inextensible ring), solved with the same
+        factorisation, and search along the arc q + a delta + a^2 c. Off by default (docs/scaling.md).
     dt : explicit time step (physical time for the rod's line density rho_A); None picks ``safety / omega_max``,
         half the stability limit 2 / omega_max. A dt above the stability limit is refused with a ValueError.
     safety : fraction of the stable explicit step used.
@@ -68,6 +73,7 @@ class SolverOptions:
     dt_growth: float = 10.0
     line_search_steps: int = 10
     armijo: float = 1e-4
+    second_order_correction: bool = False
     dt: float | None = None
     safety: float = 0.9
     fire_n_min: int = 5

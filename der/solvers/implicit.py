@@ -25,7 +25,10 @@ import time
 import numpy as np
 
 from ..geometry import add_compensated
-from ..linalg import add_diagonal, band_resolve, band_solve, band_to_coo, dot, dot_abs
+from ..linalg import (
+    BandLDLT, add_diagonal, band_resolve, band_solve, band_to_coo, condense_band, constrain_band, dot, dot_abs,
+    expand_step,
+)
 from .system import (
     FLOOR_FACTOR, INTERRUPTS, condense_forces, constrain_system, constraint_residual, energy_terms, evaluate_forces,
     evaluate_system, expand, final_result, floor_forces, floor_verdict, is_interrupt, load_scales, max_strain,
@@ -48,27 +51,95 @@ MAX_SHRINKS = 40
 IN_PLACE = True
 
 
-def second_order_correction(system, state, delta, in_place):
+def second_order_correction(system, state, delta, resolve):
     """The correction c of a Newton step ``delta`` for the chord error of its straight line: K c = -J^T (k g2),
     g2 the elongation the step adds to each edge beyond its linearisation (``stretch.chord_excess_forces``),
-    solved with the factors of the matrix that gave ``delta`` (``linalg.band_resolve``: no new factorisation),
-    on the free variables and expanded to q. Along q + a delta + a^2 c the edges keep their lengths to third
-    order in a where the straight line stretches them at second order. None if there is nothing to correct or
-    no factors to reuse."""
+    solved by ``resolve`` (generalized forces in q -> step in q) with the factors of the matrix that gave
+    ``delta`` (no new factorisation). Along q + a delta + a^2 c the edges keep their lengths to third order in a
+    where the straight line stretches them at second order. None if there is nothing to correct or no factors
+    to reuse."""
     from ..energies.stretch import chord_excess_forces
 
-    if not in_place:
+    if resolve is None:
         return None
     rhs = np.empty(system.n_dof)
     worst = chord_excess_forces(state_edges(system, state), system.rod.edge_nodes, delta, system.plan.k_stretch,
                                 rhs)
     if not worst > 0.0:
         return None
-    condense_forces(system, rhs)
-    c = band_resolve(system.ab, system.kl, system.ku, system.perm, rhs, getattr(system, "ldlt", None))
+    c = resolve(rhs)
     if c is None or not np.all(np.isfinite(c)):
         return None
-    return expand(system, c)
+    return c
+
+
+def _band_resolve_q(system, rhs):
+    """K^-1 rhs with the factors the last band solve of the node-coordinate Newton matrix left (``band_resolve``):
+    ``rhs`` generalized forces in q, condensed to the free variables here; the step expanded to q."""
+    condense_forces(system, rhs)
+    c = band_resolve(system.ab, system.kl, system.ku, system.perm, rhs, getattr(system, "ldlt", None))
+    return None if c is None else expand(system, c)
+
+
+class EdgeNewton:
+    """The Newton systems of an open rod held at its start solved in edge coordinates
+    (``SolverOptions.edge_coordinates``): z holds x_0 and the edge vectors e_c = x_c - x_{c-1}, q = T z
+    (``stability._EdgeCoordinates``, which reads K_e = T^T K T off the assembled node band without cancellation).
+    In node coordinates the Newton matrix of a fine inextensible rod has entries c A1 / h^3 (the axial penalty)
+    against a smooth bending mode's A1 h / L^4: a condition number ~ (L / h)^4, 10^20 at 10^5 edges, beyond
+    double precision, where LAPACK's pivoted solve returned directions with a relative residual of 0.9 and once
+    not a descent direction (docs/scaling.md); in edge coordinates the penalty acts on each edge alone and the
+    condition number is ~ (L / h)^2. The pseudo-time damping is diag(|K_e|) in these coordinates."""
+
+    def __init__(self, system, state):
+        from .stability import EDGE_BAND, _EdgeCoordinates
+
+        self.ez = _EdgeCoordinates(system, state)
+        self.kb = EDGE_BAND
+        self.ldlt = BandLDLT(system.n_dof, EDGE_BAND)
+        self.abz = None
+        self.checked = None      # whether K_e reproduces K (translation invariance), checked on the first band
+
+    @staticmethod
+    def eligible(system):
+        from .stability import _edge_eligible
+
+        return _edge_eligible(system) and system.links.tri_dep.size == 0
+
+    def usable(self, system):
+        """Whether K_e (from the band at the state, assembled and unfactorised) reproduces K: checked once."""
+        from .stability import EDGE_CHECK_TOL
+
+        if self.checked is None:
+            abz = self.ez.band(system.ab, system.kl, system.ku)
+            self.checked = bool(self.ez.check_band(system.ab, system.kl, system.ku, abz) <= EDGE_CHECK_TOL)
+        return self.checked
+
+    def solve(self, system, R, dt):
+        """(delta in q, info): (K_e + D_e / dt) z = T^T R on the free z, D_e = diag(|K_e|), delta = T z."""
+        ez, kb = self.ez, self.kb
+        abz = ez.band(system.ab, system.kl, system.ku)
+        diag = np.abs(abz[2 * kb, :])
+        diag[diag == 0] = 1.0
+        add_diagonal(abz, kb, kb, ez.perm, diag, 1.0 / dt)
+        if ez.tri_dep.size:
+            condense_band(abz, kb, kb, ez.perm, ez.tri_dep, ez.tri_master, ez.tri_coef)
+        constrain_band(abz, kb, kb, ez.perm, ez.fixed, 1.0)
+        z, info = band_solve(abz, kb, kb, ez.perm, ez.condense_full(ez.transpose_to_z(R)), ldlt=self.ldlt)
+        self.abz = abz
+        return self.to_q(z), info
+
+    def to_q(self, z):
+        ez = self.ez
+        if ez.tri_dep.size:
+            expand_step(z, ez.tri_dep, ez.tri_master, ez.tri_coef)
+        return ez.to_q(z)
+
+    def resolve(self, rhs):
+        """K^-1 rhs (generalized forces in q -> step in q) with the factors of the last ``solve``."""
+        ez = self.ez
+        z = band_resolve(self.abz, self.kb, self.kb, ez.perm, ez.condense_full(ez.transpose_to_z(rhs)), self.ldlt)
+        return None if z is None else self.to_q(z)
 
 
 def shrink(dt, options):
@@ -131,6 +202,8 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     # the second-order correction of a refused full step (SolverOptions.second_order_correction): band path only
     soc = (options.second_order_correction and not system.terms and system.parts is None
            and bool(system.plan.has_stretch))
+    # the Newton systems in edge coordinates (SolverOptions.edge_coordinates): open rods held at their start
+    edge = EdgeNewton(system, state) if options.edge_coordinates and EdgeNewton.eligible(system) else None
     # contact: exact (unprojected) barrier Hessian in Newton's end game: below a residual the terms set (a smooth
     # barrier, der/contact/sampled.py, sets infinity: exact from the start, the projected one only as a fallback)
     exact_below = max([getattr(t, "exact_hessian_below", EXACT_CONTACT_BELOW) for t in system.terms],
@@ -248,19 +321,27 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 if _attempt == 12 and residual < 100.0 * residual_floor(system, state, scales):
                     break   # near the round-off floor a step that lowers the energy may not exist
                 t_phase = time.perf_counter()
-                if in_place:
-                    work = system.ab
-                    band_at_state = False       # factorised in place just below
+                if edge is not None and edge.usable(system):
+                    # edge coordinates: K_e read off the assembled band, which stays unfactorised (a retried
+                    # step needs no new assembly)
+                    delta, info = edge.solve(system, R, dt)
+                    system.linear_solves["edge"] = system.linear_solves.get("edge", 0) + 1
+                    resolve = edge.resolve
                 else:
-                    work[:] = ab_K
-                add_diagonal(work, kl, ku, perm, diag, 1.0 / dt)
-                constrain_system(system, work, 1.0)     # T^T (K + D/dt) T: the end supports' free variables
-                if coo:
-                    delta, info = _contact_solve(system, work, coo, R)
-                else:
-                    delta, info = band_solve(work, kl, ku, perm, R, ldlt=getattr(system, "ldlt", None))
-                    system.linear_solves["band"] += 1
-                expand(system, delta)
+                    if in_place:
+                        work = system.ab
+                        band_at_state = False       # factorised in place just below
+                    else:
+                        work[:] = ab_K
+                    add_diagonal(work, kl, ku, perm, diag, 1.0 / dt)
+                    constrain_system(system, work, 1.0)     # T^T (K + D/dt) T: the end supports' free variables
+                    if coo:
+                        delta, info = _contact_solve(system, work, coo, R)
+                    else:
+                        delta, info = band_solve(work, kl, ku, perm, R, ldlt=getattr(system, "ldlt", None))
+                        system.linear_solves["band"] += 1
+                    expand(system, delta)
+                    resolve = (lambda rhs: _band_resolve_q(system, rhs)) if in_place and not coo else None
                 timings["factorisation"] += time.perf_counter() - t_phase
                 with np.errstate(over="ignore", invalid="ignore"):   # a huge step is refused just below
                     slope = dot(R, delta)
@@ -307,7 +388,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                     if arc is None and ls == 0 and soc:
                         # the full step was refused: correct it for the chord error of the edges it turns and
                         # try the full step again along the arc (one solve with the same factors)
-                        arc = second_order_correction(system, state, delta, in_place)
+                        arc = second_order_correction(system, state, delta, resolve)
                         if arc is not None:
                             system.linear_solves["second_order"] = system.linear_solves.get("second_order", 0) + 1
                             if direction_buf is None:

@@ -33,6 +33,10 @@ class SolverOptions:
         turns beyond its linearisation (the chord error |d_perp|^2 / 2h, priced by the axial stiffness: the
         Maratos effect that stalls Newton's method on a fine inextensible ring), solved with the same
         factorisation, and search along the arc q + a delta + a^2 c. Off by default (docs/scaling.md).
+    edge_coordinates : implicit solver, one open rod held at its start (a clamp, hinge or roller at the start, or
+        a pin on node 0; no contact, no follower loads): solve each Newton system in edge coordinates (x_0 and
+        the edge vectors), where the axial penalty acts on each edge alone: condition number ~ (L/h)^2 instead
+        of (L/h)^4. Off by default (docs/scaling.md).
     dt : explicit time step (physical time for the rod's line density rho_A); None picks ``safety / omega_max``,
         half the stability limit 2 / omega_max. A dt above the stability limit is refused with a ValueError.
     safety : fraction of the stable explicit step used.
@@ -74,6 +78,7 @@ class SolverOptions:
     line_search_steps: int = 10
     armijo: float = 1e-4
     second_order_correction: bool = False
+    edge_coordinates: bool = False
     dt: float | None = None
     safety: float = 0.9
     fire_n_min: int = 5

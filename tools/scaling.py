@@ -34,8 +34,9 @@ curvature binormal and the elongation are formed from the edges' low parts too (
 ``stencils.elongation``): the rounding of unit tangents and of |e| (eps absolute against h kappa, eps |e| against
 the elongation), which the stiffnesses A1 / h^3 and c A1 / h^3 turned into a noise growing like n, is gone; ring
 torsion's measured noise is about 1e-11 at every n (docs/scaling.md). ``--problems ring_torsion`` runs one problem,
-``--time-budget`` sets the solve's wall-clock budget (default 120 s), ``--second-order-correction`` solves with
-``SolverOptions(second_order_correction=True)`` (rows carry ``second_order_correction`` and ``linear_solves``).
+``--time-budget`` sets the solve's wall-clock budget (default 120 s), ``--second-order-correction`` and
+``--edge-coordinates`` solve with those ``SolverOptions`` (rows carry ``second_order_correction``,
+``edge_coordinates`` and ``linear_solves``).
 """
 import argparse
 import contextlib
@@ -150,9 +151,9 @@ def dgbsv_seconds(scene, state, start=None, repeat=3):
     return best, floor, noise
 
 
-def single(problem, n, time_budget=120.0, trace=True, second_order_correction=False):
-    """One run in this process; returns a dict (called in a child process). ``second_order_correction``: the
-    solver option of that name (``SolverOptions.second_order_correction``)."""
+def single(problem, n, time_budget=120.0, trace=True, second_order_correction=False, edge_coordinates=False):
+    """One run in this process; returns a dict (called in a child process). ``second_order_correction``,
+    ``edge_coordinates``: the solver options of those names (``SolverOptions``)."""
     import tracemalloc
 
     import der
@@ -168,7 +169,8 @@ def single(problem, n, time_budget=120.0, trace=True, second_order_correction=Fa
     with _loop_cpu_time() as loop_cpu:
         res = der.solve(scene, state=state, stability=False, raise_on_failure=False,
                         options=der.SolverOptions(time_budget=time_budget, tol=TOL,
-                                                  second_order_correction=second_order_correction))
+                                                  second_order_correction=second_order_correction,
+                                                  edge_coordinates=edge_coordinates))
     cpu1 = resource.getrusage(resource.RUSAGE_SELF)
     peak_rss = cpu1.ru_maxrss
     band_solves = dict(BAND_SOLVES)   # the solve's band solves by path (symmetric LDL^T accepted, or dgbsv)
@@ -176,7 +178,8 @@ def single(problem, n, time_budget=120.0, trace=True, second_order_correction=Fa
     start = state if state is not None else scene.rod.rest_state()
     t_dgbsv, floor, noise = dgbsv_seconds(scene, res.state, start)
     out = {"problem": problem, "n": n, "converged": res.converged, "status": res.status, "tol": TOL,
-           "second_order_correction": second_order_correction, "linear_solves": res.linear_solves,
+           "second_order_correction": second_order_correction, "edge_coordinates": edge_coordinates,
+           "linear_solves": res.linear_solves,
            "iterations": res.iterations, "solve_s": res.wall_time, "setup_s": setup_s,
            "s_per_iteration": s_per_iteration, "dgbsv_s": t_dgbsv,
            # CPU seconds of the solve (user, system): on a shared machine wall time also counts other processes
@@ -286,6 +289,9 @@ def main(argv=None):
     ap.add_argument("--second-order-correction", action="store_true",
                     help="solve with SolverOptions(second_order_correction=True) (a refused Newton step corrected "
                          "for its chord error with the same factors, searched along an arc)")
+    ap.add_argument("--edge-coordinates", action="store_true",
+                    help="solve with SolverOptions(edge_coordinates=True) (Newton systems of an open rod held at its "
+                         "start in edge coordinates; the helix between two clamps is not eligible)")
     ap.add_argument("--time-budget", type=float, default=120.0,
                     help="wall-clock budget of each solve in seconds (default 120; a loaded machine may need more)")
     args = ap.parse_args(argv)
@@ -306,7 +312,8 @@ def main(argv=None):
         return
     if args.single:
         print(json.dumps(single(args.single[0], int(args.single[1]), time_budget=args.time_budget,
-                                trace=not args.no_trace, second_order_correction=args.second_order_correction)))
+                                trace=not args.no_trace, second_order_correction=args.second_order_correction,
+                                edge_coordinates=args.edge_coordinates)))
         return
     if args.million:
         return million(args)
@@ -315,7 +322,8 @@ def main(argv=None):
         for n in args.n:
             out = subprocess.run([sys.executable, __file__, "--single", problem, str(n), "--time-budget",
                                   str(args.time_budget)]
-                                 + (["--second-order-correction"] if args.second_order_correction else []),
+                                 + (["--second-order-correction"] if args.second_order_correction else [])
+                                 + (["--edge-coordinates"] if args.edge_coordinates else []),
                                  capture_output=True, text=True)
             try:
                 r = json.loads(out.stdout.strip().splitlines()[-1])

@@ -27,7 +27,7 @@ import numpy as np
 from ..geometry import add_compensated
 from ..linalg import (
     BandLDLT, add_diagonal, band_resolve, band_solve, band_to_coo, condense_band, constrain_band, dot, dot_abs,
-    expand_step,
+    expand_step, zero_band,
 )
 from .system import (
     FLOOR_FACTOR, INTERRUPTS, condense_forces, constrain_system, constraint_residual, energy_terms, evaluate_forces,
@@ -106,19 +106,30 @@ class EdgeNewton:
 
         return _edge_eligible(system) and system.links.tri_dep.size == 0
 
+    def band(self, system):
+        """K_e read off the assembled band ``system.ab`` into this solver's one band array (reused)."""
+        from .stability import _edge_band_fill
+
+        if self.abz is None:
+            self.abz = np.zeros((3 * self.kb + 1, system.n_dof), order="F")
+        else:
+            zero_band(self.abz)
+        _edge_band_fill(system.ab, system.kl, system.ku, self.ez.N, self.abz, self.kb)
+        return self.abz
+
     def usable(self, system):
         """Whether K_e (from the band at the state, assembled and unfactorised) reproduces K: checked once."""
         from .stability import EDGE_CHECK_TOL
 
         if self.checked is None:
-            abz = self.ez.band(system.ab, system.kl, system.ku)
+            abz = self.band(system)
             self.checked = bool(self.ez.check_band(system.ab, system.kl, system.ku, abz) <= EDGE_CHECK_TOL)
         return self.checked
 
     def solve(self, system, R, dt):
         """(delta in q, info): (K_e + D_e / dt) z = T^T R on the free z, D_e = diag(|K_e|), delta = T z."""
         ez, kb = self.ez, self.kb
-        abz = ez.band(system.ab, system.kl, system.ku)
+        abz = self.band(system)
         diag = np.abs(abz[2 * kb, :])
         diag[diag == 0] = 1.0
         add_diagonal(abz, kb, kb, ez.perm, diag, 1.0 / dt)
@@ -126,7 +137,6 @@ class EdgeNewton:
             condense_band(abz, kb, kb, ez.perm, ez.tri_dep, ez.tri_master, ez.tri_coef)
         constrain_band(abz, kb, kb, ez.perm, ez.fixed, 1.0)
         z, info = band_solve(abz, kb, kb, ez.perm, ez.condense_full(ez.transpose_to_z(R)), ldlt=self.ldlt)
-        self.abz = abz
         return self.to_q(z), info
 
     def to_q(self, z):

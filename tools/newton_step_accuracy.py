@@ -1,6 +1,6 @@
 """How accurately the implicit solver's first Newton step of ring torsion solves its linear system, in node
-coordinates (LAPACK's pivoted band LU, as the solver does; and after iterative refinement against the assembled
-band) and in edge coordinates (``SolverOptions.edge_coordinates``).
+coordinates (LAPACK's pivoted band LU, as the solver does; after a Jacobi equilibration of the band; and after
+iterative refinement against the assembled band) and in edge coordinates (``SolverOptions.edge_coordinates``).
 
     python tools/newton_step_accuracy.py [--n 300 1000 3000 10000 30000 100000] [--refinements 2] [--json]
 
@@ -63,12 +63,23 @@ def measure(n, refinements=2):
     add_diagonal(ab, system.kl, system.ku, system.perm, diag, 1e-30)       # the solver's D / dt at dt = 1e30
     constrain_system(system, ab, 1.0)
     A = ab.copy(order="F")                                                   # the band before it is factorised
+    # equilibrated: S^-1 K S^-1 (S d) = S^-1 R with S = sqrt(|diag K|) (Jacobi scaling), the same LU
+    S = np.sqrt(np.abs(A[system.kl + system.ku, :]))          # band order
+    Ae = A / S[None, :]
+    off = system.kl + system.ku
+    for j in range(Ae.shape[1]):
+        lo, hi = max(0, j - system.ku), min(Ae.shape[1] - 1, j + system.kl)
+        Ae[off + lo - j:off + hi - j + 1, j] /= S[lo:hi + 1]
+    Sq = S[system.perm]                                        # DOF order
+    de, _ = band_solve(np.asfortranarray(Ae), system.kl, system.ku, system.perm, R / Sq)
+    de = expand(system, de / Sq)
     dq, info = band_solve(ab, system.kl, system.ku, system.perm, R, ldlt=system.ldlt)
     expand(system, dq)
     kz = np.empty(dz.size)
     band_matvec(abz, EDGE_BAND, EDGE_BAND, ez.perm, solved["z"], kz, False)
     eta_z = float(np.linalg.norm(ez.condense_full(kz) - rz) / np.linalg.norm(rz))
-    out = {"n": n, "node_path": system.ldlt.factors, "eta_node": eta(dq), "eta_edge": eta(dz), "eta_edge_z": eta_z}
+    out = {"n": n, "node_path": system.ldlt.factors, "eta_node": eta(dq), "eta_node_equilibrated": eta(de),
+           "eta_edge": eta(dz), "eta_edge_z": eta_z}
     d = dq.copy()
     for k in range(refinements):
         Ad = np.empty(d.size)

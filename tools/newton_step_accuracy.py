@@ -10,7 +10,8 @@ its start, end torque 1e-3 about the end tangent), Newton's matrix (dt -> infini
 applied as T^-T K_e T^-1 (the edge-coordinate stiffness read off the band: no cancellation of the node-coordinate
 entries c A1 / h^3, so the measure itself is not drowned by the rounding it measures); ``eta_edge_z`` the same for
 the edge-coordinate solution z itself, before it is turned into a step of the positions (q = T z, cumulative
-sums, whose rounding the edges then see again). Refinement: d += K^-1 (R -
+sums, whose rounding the edges then see again); ``eta_edge`` is the step as the solver applies it (a compensated
+pair, ``EdgeNewton.to_q``), ``eta_edge_hi`` its high part alone (what the solver applied before). Refinement: d += K^-1 (R -
 K d) with the same LU factors and the residual formed from a copy of the node band (what iterative refinement in
 working precision can do; it contracts only while the factors' error times the condition number is below 1).
 """
@@ -52,9 +53,12 @@ def measure(n, refinements=2):
     dz, _ = edge.solve(system, R, 1e30)
     rz = ez.condense_full(ez.transpose_to_z(R))
 
-    def eta(d):
+    def eta(d, lo=None):
         kz = np.empty(d.size)
-        band_matvec(abz, EDGE_BAND, EDGE_BAND, ez.perm, ez.to_z(d), kz, False)
+        z = ez.to_z(d)
+        if lo is not None:       # a compensated step: its edges are the differences of both parts
+            z = z + ez.to_z(lo)
+        band_matvec(abz, EDGE_BAND, EDGE_BAND, ez.perm, z, kz, False)
         return float(np.linalg.norm(ez.condense_full(kz) - rz) / np.linalg.norm(rz))
 
     ab = system.ab.copy(order="F")
@@ -79,7 +83,7 @@ def measure(n, refinements=2):
     band_matvec(abz, EDGE_BAND, EDGE_BAND, ez.perm, solved["z"], kz, False)
     eta_z = float(np.linalg.norm(ez.condense_full(kz) - rz) / np.linalg.norm(rz))
     out = {"n": n, "node_path": system.ldlt.factors, "eta_node": eta(dq), "eta_node_equilibrated": eta(de),
-           "eta_edge": eta(dz), "eta_edge_z": eta_z}
+           "eta_edge": eta(dz, edge.step_lo), "eta_edge_hi": eta(dz), "eta_edge_z": eta_z}
     d = dq.copy()
     for k in range(refinements):
         Ad = np.empty(d.size)

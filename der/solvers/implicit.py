@@ -23,6 +23,7 @@ low of the energy minus the load work by more than the round-off forces can do a
 import time
 
 import numpy as np
+from numba import njit
 
 from ..geometry import add_compensated
 from ..linalg import (
@@ -81,6 +82,29 @@ def _band_resolve_q(system, rhs):
     return None if c is None else expand(system, c)
 
 
+@njit(cache=True)
+def _cumulative_edges(z, n_nodes, hi, lo):
+    """(hi, lo) <- q = T z as compensated pairs: for each node slot c the positions x_0 + e_0 + ... + e_{c-1} summed
+    with TwoSum (the running error carried and renormalised), so that hi + lo is the exact prefix sum to about eps^2;
+    the theta slots are copied (lo 0)."""
+    for i in range(z.shape[0]):
+        hi[i] = z[i]
+        lo[i] = 0.0
+    for a in range(3):
+        s = 0.0
+        c = 0.0
+        for k in range(n_nodes):
+            x = z[4 * k + a]
+            t = s + x
+            bb = t - s
+            c += (s - (t - bb)) + (x - bb)
+            h = t + c
+            c = c - (h - t)
+            s = h
+            hi[4 * k + a] = s
+            lo[4 * k + a] = c
+
+
 class EdgeNewton:
     """The Newton systems of an open rod held at its start solved in edge coordinates
     (``SolverOptions.edge_coordinates``): z holds x_0 and the edge vectors e_c = x_c - x_{c-1}, q = T z
@@ -99,6 +123,7 @@ class EdgeNewton:
         self.ldlt = BandLDLT(system.n_dof, EDGE_BAND)
         self.abz = None
         self.checked = None      # whether K_e reproduces K (translation invariance), checked on the first band
+        self.step_lo = None      # the low part of the last step (``to_q``)
 
     @staticmethod
     def eligible(system):
@@ -140,10 +165,16 @@ class EdgeNewton:
         return self.to_q(z), info
 
     def to_q(self, z):
+        """The step in q of the edge-coordinate solution z (links applied): cumulative sums of the edges, as a
+        compensated pair -- returned the high part, ``self.step_lo`` the low part (the edges of the step, its
+        differences, then come back to their own rounding, not to eps |step|: issue 17, docs/scaling.md)."""
         ez = self.ez
         if ez.tri_dep.size:
             expand_step(z, ez.tri_dep, ez.tri_master, ez.tri_coef)
-        return ez.to_q(z)
+        hi = np.empty_like(z)
+        self.step_lo = np.empty_like(z)
+        _cumulative_edges(z, ez.N, hi, self.step_lo)
+        return hi
 
     def resolve(self, rhs):
         """K^-1 rhs (generalized forces in q -> step in q) with the factors of the last ``solve``."""
@@ -208,7 +239,6 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     fext = np.empty(n_dof)          # the loads at ``state`` (the line search's evaluations overwrite system.fext)
     q_trial = np.empty(n_dof)
     step = np.empty(n_dof)
-    direction_buf = None
     # the second-order correction of a refused full step (SolverOptions.second_order_correction): band path only
     soc = (options.second_order_correction and not system.terms and system.parts is None
            and bool(system.plan.has_stretch))
@@ -335,6 +365,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                     # edge coordinates: K_e read off the assembled band, which stays unfactorised (a retried
                     # step needs no new assembly)
                     delta, info = edge.solve(system, R, dt)
+                    step_lo = edge.step_lo
                     system.linear_solves["edge"] = system.linear_solves.get("edge", 0) + 1
                     resolve = edge.resolve
                 else:
@@ -351,6 +382,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                         delta, info = band_solve(work, kl, ku, perm, R, ldlt=getattr(system, "ldlt", None))
                         system.linear_solves["band"] += 1
                     expand(system, delta)
+                    step_lo = None
                     resolve = (lambda rhs: _band_resolve_q(system, rhs)) if in_place and not coo else None
                 timings["factorisation"] += time.perf_counter() - t_phase
                 with np.errstate(over="ignore", invalid="ignore"):   # a huge step is refused just below
@@ -371,26 +403,40 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 a_start = a
                 t_phase = time.perf_counter()
                 arc = None          # the second-order correction c: the search then runs along q + a delta + a^2 c
+                # the edge path's step is a compensated pair (delta + step_lo: the cumulative sums of the edges kept
+                # to their own rounding); the node path's is delta alone
+                compensated = getattr(state, "q_lo", None) is not None and getattr(trial, "q_lo", None) is not None
                 ls = 0
                 while ls < options.line_search_steps:
-                    if arc is None:
-                        direction = delta
-                        scale = a
-                    else:           # the step a delta + a^2 c, added to q as one compensated step
-                        np.multiply(arc, a, out=direction)
-                        direction += delta
-                        direction *= a
-                        scale = 1.0
-                    if getattr(state, "q_lo", None) is not None and getattr(trial, "q_lo", None) is not None:
-                        add_compensated(state.q, state.q_lo, scale, direction, trial.q, trial.q_lo)
-                        q_new = trial.q
-                    else:       # a state without low parts (prepared elsewhere): plain coordinates
-                        np.multiply(direction, scale, out=q_trial)
-                        q_trial += state.q
-                        q_new = q_trial
+                    if arc is None and step_lo is None:
+                        if compensated:
+                            add_compensated(state.q, state.q_lo, a, delta, trial.q, trial.q_lo)
+                            q_new = trial.q
+                        else:       # a state without low parts (prepared elsewhere): plain coordinates
+                            np.multiply(delta, a, out=q_trial)
+                            q_trial += state.q
+                            q_new = q_trial
+                        work_done = a * dot(fext, delta)
+                    else:
+                        # q + a (delta + step_lo) + a^2 c, each part added in turn (a is 1 or a power of 2 from
+                        # the halvings: a delta is exact, and the edges see the step to their own rounding)
+                        if compensated:
+                            add_compensated(state.q, state.q_lo, a, delta, trial.q, trial.q_lo)
+                            if step_lo is not None:
+                                add_compensated(trial.q, trial.q_lo, a, step_lo, trial.q, trial.q_lo)
+                            if arc is not None:
+                                add_compensated(trial.q, trial.q_lo, a * a, arc, trial.q, trial.q_lo)
+                            q_new = trial.q
+                        else:
+                            np.multiply(delta, a, out=q_trial)
+                            q_trial += state.q
+                            if arc is not None:
+                                q_trial += (a * a) * arc
+                            q_new = q_trial
+                        work_done = a * dot(fext, delta) + (a * a * dot(fext, arc) if arc is not None else 0.0)
                     if transport(system, state, q_new, trial):
                         e_trial = evaluate_system(system, trial, 0)
-                        merit = e_trial - energy - scale * dot(fext, direction)
+                        merit = e_trial - energy - work_done
                         slack = 1e-13 * (abs(energy) + abs(e_trial)) + 1e-300
                         if np.isfinite(e_trial) and merit <= -options.armijo * a * slope + slack:
                             accepted = True
@@ -401,9 +447,6 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                         arc = second_order_correction(system, state, delta, resolve)
                         if arc is not None:
                             system.linear_solves["second_order"] = system.linear_solves.get("second_order", 0) + 1
-                            if direction_buf is None:
-                                direction_buf = np.empty(n_dof)
-                            direction = direction_buf
                             continue
                     a *= 0.5
                     ls += 1

@@ -192,6 +192,22 @@ def test_edge_newton_reach_the_equilibrium_of_node_coordinates():
         assert np.linalg.norm(rot - rot_ref) <= 1e-7 * np.linalg.norm(rot_ref)
 
 
+def test_second_order_correction_with_edge_newton_solves_the_correction_with_the_edge_factors():
+    # the plateau scene of the first test with Newton steps in edge coordinates: alone they are cut by the chord
+    # error as the node steps are (max_iterations at 8); the correction, solved with the edge factors
+    # (EdgeNewton.resolve: no node-coordinate factorisation at all), converges in 4 (measured)
+    scene = ring_torsion(200, 0.02)
+    edge = der.solve(scene, stability=False, raise_on_failure=False, max_iterations=8, edge_newton=True)
+    both = der.solve(scene, stability=False, raise_on_failure=False, max_iterations=8, edge_newton=True,
+                     second_order_correction=True)
+    assert not edge.converged and edge.linear_solves.get("edge", 0) > 0
+    assert both.status == "converged" and both.residual <= 1e-8 and both.iterations <= 6
+    assert both.linear_solves.get("second_order", 0) >= 1 and both.linear_solves["band"] == 0
+    full = der.solve(scene, stability=False, tol=1e-10)
+    rot, ref = dg.end_motion(scene.rod, both.state)[1], dg.end_motion(scene.rod, full.state)[1]
+    assert np.linalg.norm(rot - ref) <= 1e-6 * np.linalg.norm(ref)
+
+
 def test_edge_newton_apply_only_to_open_rods_held_at_their_start():
     from der.solvers.edge_coordinates import edge_eligible
     from der.solvers.system import build_system

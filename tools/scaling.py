@@ -33,7 +33,8 @@ eps |x| (before: a floor growing like n^3 for ring torsion at fixed L, like n fo
 curvature binormal and the elongation are formed from the edges' low parts too (``stencils.curvature_binormal_of``,
 ``stencils.elongation``): the rounding of unit tangents and of |e| (eps absolute against h kappa, eps |e| against
 the elongation), which the stiffnesses A1 / h^3 and c A1 / h^3 turned into a noise growing like n, is gone; ring
-torsion's measured noise is about 1e-11 at every n (docs/scaling.md). ``--problems ring_torsion`` runs one problem,
+torsion's measured noise is about 1e-11 at every n relative to the old force scale (where the clamp's reaction
+couple set it), ~1.6e-12 n relative to the load since 14bdade (docs/scaling.md). ``--problems ring_torsion`` runs one problem,
 ``--time-budget`` sets the solve's wall-clock budget (default 120 s), ``--second-order-correction`` and
 ``--edge-newton`` solve with those ``SolverOptions`` (rows carry ``second_order_correction``,
 ``edge_newton`` and ``linear_solves``).

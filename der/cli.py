@@ -110,6 +110,9 @@ class SolveRunner:
         budget = getattr(self.args, "time_budget", None)
         if budget is not None:
             options.setdefault("time_budget", budget)
+        for flag in ("second_order_correction", "edge_newton"):      # implicit solver options (issue 17)
+            if getattr(self.args, flag, False):
+                options.setdefault(flag, True)
         record = None
         if getattr(self.args, "rrd", None):
             if self.recorder is None:
@@ -268,6 +271,12 @@ def scenario_main(name, description, parameters, run, n_default=100, n_min=2, ar
     parser.add_argument("--time-budget", type=float, default=None,
                         help="wall-clock seconds per solve (SolverOptions.time_budget); a solve that uses it up "
                              "ends with status time_budget (exit 3)")
+    parser.add_argument("--second-order-correction", action="store_true",
+                        help="implicit solver: correct a refused Newton step for its chord error and search along "
+                             "an arc (SolverOptions.second_order_correction)")
+    parser.add_argument("--edge-newton", action="store_true",
+                        help="implicit solver: Newton steps of an open rod held at its start in edge coordinates "
+                             "(SolverOptions.edge_newton)")
     parser.add_argument("--rrd", default=None, help="write a rerun recording (.rrd) to this file")
     parser.add_argument("--json", action="store_true", help="print one JSON object as the last line of stdout")
     notes = []

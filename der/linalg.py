@@ -227,11 +227,16 @@ class BandLDLT:
         self.accepted = False
         self.backward_error = np.inf
         self.skip = 0           # band solves left to send straight to dgbsv after a refusal (LDLT_RETRY_AFTER)
+        # which factors the last band_solve left for band_resolve: "ldlt" (L, D; the band untouched), "dgbsv"
+        # (the LU factors in the band itself, their pivots in ``piv``) or None
+        self.factors = None
+        self.piv = None
 
     def release(self):
         """Drop the work arrays (allocated again by the next solve that uses them): after a refused
         factorisation, so that the dgbsv solves that follow do not carry them (10^6 edges: 416 MB)."""
         self.L = self.D = self.r = self.x = None
+        self.factors = self.piv = self.lu = None
 
     def ensure(self, n, b):
         """The work arrays for ``n`` rows and half-bandwidth ``b`` (allocated if missing or of another size)."""
@@ -446,6 +451,7 @@ def band_solve(ab, kl, ku, perm, rhs, overwrite=True, ldlt=None):
             ldlt = BandLDLT(n, kl)
         ldlt.ensure(n, kl)
         ldlt.accepted, ldlt.backward_error = False, np.inf
+        ldlt.factors, ldlt.piv = None, None
         ldlt.negatives = band_ldlt_compact(ab, kl, ku, ldlt.L, ldlt.D)
         if ldlt.negatives >= 0:
             # (no copies of a vector beyond the solution: a 10^6-edge rod's vectors are 32 MB each)
@@ -463,6 +469,7 @@ def band_solve(ab, kl, ku, perm, rhs, overwrite=True, ldlt=None):
             ldlt.backward_error = worst
             if worst <= LDLT_BACKWARD_ERROR:
                 ldlt.accepted = True
+                ldlt.factors = "ldlt"
                 BAND_SOLVES["ldlt"] += 1
                 return xs.reshape(rhs.shape), 0
         BAND_SOLVES["ldlt_refused"] += 1
@@ -471,8 +478,31 @@ def band_solve(ab, kl, ku, perm, rhs, overwrite=True, ldlt=None):
     b = np.empty_like(rhs)
     b[perm] = rhs
     BAND_SOLVES["dgbsv"] += 1
-    _, _, xp, info = dgbsv(kl, ku, ab, b, overwrite_ab=True, overwrite_b=True)
+    lub, piv, xp, info = dgbsv(kl, ku, ab, b, overwrite_ab=True, overwrite_b=True)
+    if ldlt is not None:
+        # (``lub`` is ``ab`` itself when ``ab`` is a Fortran-ordered double band, as der's are: no copy kept)
+        ldlt.factors, ldlt.piv, ldlt.lu = ("dgbsv" if info == 0 else None), piv, lub
     return xp[perm], info
+
+
+def band_resolve(ab, kl, ku, perm, rhs, ldlt):
+    """x with A x = rhs for the matrix the last ``band_solve(ab, ..., ldlt=ldlt)`` factorised, reusing its factors
+    (no new factorisation, O(n b)): the LDL^T factors refined against the band (untouched on that path), or
+    dgbsv's LU factors and pivots (``dgbtrs``). ``rhs`` (n,) in DOF order. None if that solve left no factors
+    (it failed, or ``ab`` was factorised since)."""
+    from scipy.linalg.lapack import dgbtrs
+
+    if ldlt is None or ldlt.factors is None:
+        return None
+    rhs = np.asarray(rhs, dtype=float)
+    n = ab.shape[1]
+    b = np.empty(n)
+    b[perm] = rhs
+    if ldlt.factors == "ldlt":
+        _ldlt_solve_refined(ab, kl, ku, ldlt.L, ldlt.D, b, ldlt.x, ldlt.r, LDLT_BACKWARD_ERROR, LDLT_REFINEMENTS)
+        return ldlt.x[perm]
+    x, info = dgbtrs(ldlt.lu, kl, ku, b, ldlt.piv)
+    return x[perm] if info == 0 else None
 
 
 @njit(cache=True)

@@ -116,6 +116,12 @@ def _run_kernels():
         # certification) compiles too
         solve(scene, solver=solver, tol=1e-300, raise_on_failure=False, stability=False, max_steps=20000,
               max_iterations=60, progress=False)
+    # the implicit solver's second-order correction and its Newton systems in edge coordinates (issue 17): an arc
+    # under an end torque large enough that its full Newton steps are refused for their chord error
+    arc = Scene(rod_from_shape(shapes.arc(1.0, 3.0, 60), 1.0, 1.5), loads=[end_torque([0.0, 0.0, 0.2])],
+                constraints=[clamp("start")])
+    solve(arc, tol=1e-6, raise_on_failure=False, stability=False, progress=False, second_order_correction=True,
+          edge_newton=True)
     # end supports (their banded change of variables), point torques and follower forces (issue 13)
     from .constraints import hinge
     from .loads import follower_force, point_torque

@@ -37,8 +37,11 @@ eps |x| (before: a floor growing like n^3 for ring torsion at fixed L, like n fo
 curvature binormal and the elongation are formed from the edges' low parts too (``stencils.curvature_binormal_of``,
 ``stencils.elongation``): the rounding of unit tangents and of |e| (eps absolute against h kappa, eps |e| against
 the elongation), which the stiffnesses A1 / h^3 and c A1 / h^3 turned into a noise growing like n, is gone; ring
-torsion's measured noise is about 1e-11 at every n (docs/scaling.md). ``--problems ring_torsion`` runs one problem,
-``--time-budget`` sets the solve's wall-clock budget (default 120 s).
+torsion's measured noise is about 1e-11 at every n relative to the old force scale (where the clamp's reaction
+couple set it), ~1.6e-12 n relative to the load since 14bdade (docs/scaling.md). ``--problems ring_torsion`` runs one problem,
+``--time-budget`` sets the solve's wall-clock budget (default 120 s), ``--second-order-correction`` and
+``--edge-newton`` solve with those ``SolverOptions`` (rows carry ``second_order_correction``,
+``edge_newton`` and ``linear_solves``).
 """
 import argparse
 import contextlib
@@ -153,8 +156,9 @@ def dgbsv_seconds(scene, state, start=None, repeat=3):
     return best, floor, noise
 
 
-def single(problem, n, time_budget=120.0, trace=True):
-    """One run in this process; returns a dict (called in a child process)."""
+def single(problem, n, time_budget=120.0, trace=True, second_order_correction=False, edge_newton=False):
+    """One run in this process; returns a dict (called in a child process). ``second_order_correction``,
+    ``edge_newton``: the solver options of those names (``SolverOptions``)."""
     import tracemalloc
 
     import der
@@ -169,7 +173,9 @@ def single(problem, n, time_budget=120.0, trace=True):
     with _loop_cpu_time() as loop_cpu:
         t_call, c_call = time.perf_counter(), time.process_time()
         res = der.solve(scene, state=state, stability=False, raise_on_failure=False,
-                        options=der.SolverOptions(time_budget=time_budget, tol=TOL))
+                        options=der.SolverOptions(time_budget=time_budget, tol=TOL,
+                                                  second_order_correction=second_order_correction,
+                                                  edge_newton=edge_newton))
     cpu1 = resource.getrusage(resource.RUSAGE_SELF)
     peak_rss = cpu1.ru_maxrss
     band_solves = dict(BAND_SOLVES)   # the solve's band solves by path (symmetric LDL^T accepted, or dgbsv)
@@ -182,6 +188,8 @@ def single(problem, n, time_budget=120.0, trace=True):
            "presolve_s": loop_cpu["wall_start"] - t_call, "presolve_cpu_s": loop_cpu["start"] - c_call,
            "setup_to_first_iteration_s": setup_times["setup_s"] + loop_cpu["wall_start"] - t_call,
            "setup_to_first_iteration_cpu_s": setup_times["setup_cpu_s"] + loop_cpu["start"] - c_call,
+           "second_order_correction": second_order_correction, "edge_newton": edge_newton,
+           "linear_solves": res.linear_solves,
            "s_per_iteration": s_per_iteration, "dgbsv_s": t_dgbsv,
            # CPU seconds of the solve (user, system): on a shared machine wall time also counts other processes
            "solve_cpu_user_s": cpu1.ru_utime - cpu0.ru_utime, "solve_cpu_system_s": cpu1.ru_stime - cpu0.ru_stime,
@@ -357,6 +365,12 @@ def main(argv=None):
     ap.add_argument("--from-json", default=None, metavar="JSON",
                     help="only re-plot --png from the saved output of --json (no solve)")
     ap.add_argument("--no-trace", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--second-order-correction", action="store_true",
+                    help="solve with SolverOptions(second_order_correction=True) (a refused Newton step corrected "
+                         "for its chord error with the same factors, searched along an arc)")
+    ap.add_argument("--edge-newton", action="store_true",
+                    help="solve with SolverOptions(edge_newton=True) (Newton steps of an open rod held at its "
+                         "start in edge coordinates; the helix between two clamps is not eligible)")
     ap.add_argument("--time-budget", type=float, default=120.0,
                     help="wall-clock budget of each solve in seconds (default 120; a loaded machine may need more)")
     args = ap.parse_args(argv)
@@ -382,7 +396,8 @@ def main(argv=None):
         return setup_table(args)
     if args.single:
         print(json.dumps(single(args.single[0], int(args.single[1]), time_budget=args.time_budget,
-                                trace=not args.no_trace)))
+                                trace=not args.no_trace, second_order_correction=args.second_order_correction,
+                                edge_newton=args.edge_newton)))
         return
     if args.million:
         return million(args)
@@ -390,7 +405,10 @@ def main(argv=None):
     for problem in args.problems:
         for n in args.n:
             out = subprocess.run([sys.executable, __file__, "--single", problem, str(n), "--time-budget",
-                                  str(args.time_budget)], capture_output=True, text=True)
+                                  str(args.time_budget)]
+                                 + (["--second-order-correction"] if args.second_order_correction else [])
+                                 + (["--edge-newton"] if args.edge_newton else []),
+                                 capture_output=True, text=True)
             try:
                 r = json.loads(out.stdout.strip().splitlines()[-1])
             except (ValueError, IndexError):

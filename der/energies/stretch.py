@@ -108,3 +108,49 @@ def elongations(q, edge_nodes, l_bar, E=None):
     for j in range(n):
         out[j] = elongation(Ee, j, l_bar[j])[0]
     return out
+
+
+@njit(cache=True)
+def chord_excess_forces(E, edge_nodes, delta, k, out):
+    """The generalized forces ``out`` (n_dof) <- -J^T (k g2) of the elongation a straight-line step ``delta``
+    adds beyond its linearisation, and the largest |g2|: for edge j with vector e_j (``E``, rounded high parts)
+    and step d_j = delta_b - delta_a,
+
+        g2_j = |e_j + d_j| - |e_j| - t_j . d_j = |d_perp|^2 / (|e_j + d_j| + |e_j| + t_j . d_j)
+
+    (t_j = e_j / |e_j|, d_perp the part of d_j across the edge; the quotient has no cancellation): the chord
+    error of a step that turns the edge, O(|d|^2 / |e|), which the linearised elongation t . d does not see. J is
+    the elongation's Jacobian at ``E`` (dg_j/dx_b = t_j = -dg_j/dx_a). A step that reverses an edge (a
+    non-positive denominator) contributes nothing. The second-order correction of the implicit solver solves
+    K c = -J^T (k g2) (``SolverOptions.second_order_correction``). Entries of ``out`` that no edge touches (the
+    angles) are 0."""
+    for i in range(out.shape[0]):
+        out[i] = 0.0
+    worst = 0.0
+    for j in range(edge_nodes.shape[0]):
+        a = 4 * edge_nodes[j, 0]
+        b = 4 * edge_nodes[j, 1]
+        e0, e1, e2 = E[j, 0], E[j, 1], E[j, 2]
+        le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        if not le > 0.0:
+            continue
+        t0, t1, t2 = e0 / le, e1 / le, e2 / le
+        d0 = delta[b] - delta[a]
+        d1 = delta[b + 1] - delta[a + 1]
+        d2 = delta[b + 2] - delta[a + 2]
+        td = t0 * d0 + t1 * d1 + t2 * d2
+        p0, p1, p2 = d0 - td * t0, d1 - td * t1, d2 - td * t2
+        f0, f1, f2 = e0 + d0, e1 + d1, e2 + d2
+        den = np.sqrt(f0 * f0 + f1 * f1 + f2 * f2) + le + td
+        if not den > 0.0:
+            continue
+        g2 = (p0 * p0 + p1 * p1 + p2 * p2) / den
+        worst = max(worst, abs(g2))
+        f = k[j] * g2
+        out[a] += f * t0
+        out[a + 1] += f * t1
+        out[a + 2] += f * t2
+        out[b] -= f * t0
+        out[b + 1] -= f * t1
+        out[b + 2] -= f * t2
+    return worst

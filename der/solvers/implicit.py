@@ -25,11 +25,11 @@ import time
 import numpy as np
 
 from ..geometry import add_compensated
-from ..linalg import add_diagonal, band_solve, band_to_coo, dot, dot_difference
+from ..linalg import add_diagonal, band_resolve, band_solve, band_to_coo, dot, dot_difference
 from .system import (
-    FLOOR_FACTOR, INTERRUPTS, constrain_system, constraint_residual, energy_terms, evaluate_forces, evaluate_system,
-    expand, final_result, floor_forces, floor_verdict, is_interrupt, load_scales, max_strain, multiplier_update,
-    residual_floor, residual_norm, residual_vector, transport,
+    FLOOR_FACTOR, INTERRUPTS, condense_forces, constrain_system, constraint_residual, energy_terms, evaluate_forces,
+    evaluate_system, expand, final_result, floor_forces, floor_verdict, is_interrupt, load_scales, max_strain,
+    multiplier_update, residual_floor, residual_norm, residual_vector, state_edges, transport,
 )
 
 STALL_ITERATIONS = 6
@@ -49,6 +49,46 @@ MAX_SHRINKS = 40
 # the band path factorises the Jacobian in place (False: copy it before each attempt, as the contact path does;
 # kept for the test that both end bitwise the same)
 IN_PLACE = True
+
+
+def second_order_correction(system, state, delta, resolve):
+    """The correction c of a Newton step ``delta`` for the chord error of its straight line: K c = -J^T (k g2),
+    g2 the elongation the step adds to each edge beyond its linearisation (``stretch.chord_excess_forces``),
+    solved by ``resolve`` (generalized forces in q -> step in q) with the factors of the matrix that gave
+    ``delta`` (no new factorisation). Along q + a delta + a^2 c the edges keep their lengths to third order in a
+    where the straight line stretches them at second order. None if there is nothing to correct or no factors
+    to reuse."""
+    from ..energies.stretch import chord_excess_forces
+
+    if resolve is None:
+        return None
+    rhs = np.empty(system.n_dof)
+    worst = chord_excess_forces(state_edges(system, state), system.rod.edge_nodes, delta, system.plan.k_stretch,
+                                rhs)
+    if not worst > 0.0:
+        return None
+    c = resolve(rhs)
+    if c is None or not np.all(np.isfinite(c)):
+        return None
+    return c
+
+
+def _band_resolve_q(system, rhs):
+    """K^-1 rhs with the factors the last band solve of the node-coordinate Newton matrix left (``band_resolve``):
+    ``rhs`` generalized forces in q, condensed to the free variables here; the step expanded to q."""
+    condense_forces(system, rhs)
+    c = band_resolve(system.ab, system.kl, system.ku, system.perm, rhs, getattr(system, "ldlt", None))
+    return None if c is None else expand(system, c)
+
+
+def _edge_resolve_q(system, edge, rhs):
+    """K^-1 rhs with the factors the last edge-coordinate Newton step left (``EdgeNewton.resolve``): ``rhs``
+    generalized forces in q (full), the step in q with the node links applied as for the step itself."""
+    c = edge.resolve(rhs)
+    if c is None:
+        return None
+    c[system.fixed] = 0.0
+    return expand(system, c)
 
 
 def shrink(dt, options):
@@ -128,6 +168,9 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     # work arrays reused by every iteration (issue 17: at 10^6 edges fresh n-sized arrays were page-faulted on
     # each use): the residual, the damping diagonal, the round-off forces (their rounding scale formed in place)
     R_work, diag_work, round_off_work = (np.empty(n_dof) for _ in range(3))
+    # the second-order correction of a refused full step (SolverOptions.second_order_correction): band path only
+    soc = (options.second_order_correction and not system.terms and system.parts is None
+           and bool(system.plan.has_stretch))
     # contact: exact (unprojected) barrier Hessian in Newton's end game: below a residual the terms set (a smooth
     # barrier, der/contact/sampled.py, sets infinity: exact from the start, the projected one only as a fallback)
     exact_below = max([getattr(t, "exact_hessian_below", EXACT_CONTACT_BELOW) for t in system.terms],
@@ -264,11 +307,16 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                     delta, info = edge.step(f_node, dt)
                     system.linear_solves["edge"] = system.linear_solves.get("edge", 0) + 1
                     edge_steps += 1
+                    step_lo = resolve = None
                     if info == 0:
                         # the node links exactly (T dz satisfies them to round-off): held DOFs zero, dependents
-                        # from their masters
+                        # from their masters -- on both parts of the compensated step (delta, step_lo)
                         delta[system.fixed] = 0.0
                         expand(system, delta)
+                        step_lo = edge.step_lo
+                        step_lo[system.fixed] = 0.0
+                        expand(system, step_lo)
+                        resolve = lambda rhs: _edge_resolve_q(system, edge, rhs)    # noqa: E731
                 else:
                     if in_place:
                         work = system.ab
@@ -283,6 +331,8 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                         delta, info = band_solve(work, kl, ku, perm, R, ldlt=getattr(system, "ldlt", None))
                         system.linear_solves["band"] += 1
                     expand(system, delta)
+                    step_lo = None
+                    resolve = (lambda rhs: _band_resolve_q(system, rhs)) if in_place and not coo else None
                 timings["factorisation"] += time.perf_counter() - t_phase
                 with np.errstate(over="ignore", invalid="ignore"):   # a huge step is refused just below
                     slope = dot(R, delta)
@@ -301,22 +351,54 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                         continue
                 a_start = a
                 t_phase = time.perf_counter()
-                for _ls in range(options.line_search_steps):
-                    if getattr(state, "q_lo", None) is not None and getattr(trial, "q_lo", None) is not None:
-                        add_compensated(state.q, state.q_lo, a, delta, trial.q, trial.q_lo)
-                        q_new = trial.q
-                    else:       # a state without low parts (prepared elsewhere): plain coordinates
-                        np.multiply(delta, a, out=q_trial)
-                        q_trial += state.q
-                        q_new = q_trial
+                arc = None          # the second-order correction c: the search then runs along q + a delta + a^2 c
+                # the edge path's step is a compensated pair (delta + step_lo: the cumulative sums of the edges kept
+                # to their own rounding); the node path's is delta alone
+                compensated = getattr(state, "q_lo", None) is not None and getattr(trial, "q_lo", None) is not None
+                ls = 0
+                while ls < options.line_search_steps:
+                    if arc is None and step_lo is None:
+                        if compensated:
+                            add_compensated(state.q, state.q_lo, a, delta, trial.q, trial.q_lo)
+                            q_new = trial.q
+                        else:       # a state without low parts (prepared elsewhere): plain coordinates
+                            np.multiply(delta, a, out=q_trial)
+                            q_trial += state.q
+                            q_new = q_trial
+                        work_done = a * dot(fext, delta)
+                    else:
+                        # q + a (delta + step_lo) + a^2 c, each part added in turn (a is 1 or a power of 2 from
+                        # the halvings: a delta is exact, and the edges see the step to their own rounding)
+                        if compensated:
+                            add_compensated(state.q, state.q_lo, a, delta, trial.q, trial.q_lo)
+                            if step_lo is not None:
+                                add_compensated(trial.q, trial.q_lo, a, step_lo, trial.q, trial.q_lo)
+                            if arc is not None:
+                                add_compensated(trial.q, trial.q_lo, a * a, arc, trial.q, trial.q_lo)
+                            q_new = trial.q
+                        else:
+                            np.multiply(delta, a, out=q_trial)
+                            q_trial += state.q
+                            if arc is not None:
+                                q_trial += (a * a) * arc
+                            q_new = q_trial
+                        work_done = a * dot(fext, delta) + (a * a * dot(fext, arc) if arc is not None else 0.0)
                     if transport(system, state, q_new, trial):
                         e_trial = evaluate_system(system, trial, 0)
-                        merit = e_trial - energy - a * dot(fext, delta)
+                        merit = e_trial - energy - work_done
                         slack = 1e-13 * (abs(energy) + abs(e_trial)) + 1e-300
                         if np.isfinite(e_trial) and merit <= -options.armijo * a * slope + slack:
                             accepted = True
                             break
+                    if arc is None and ls == 0 and soc:
+                        # the full step was refused: correct it for the chord error of the edges it turns and
+                        # try the full step again along the arc (one solve with the same factors)
+                        arc = second_order_correction(system, state, delta, resolve)
+                        if arc is not None:
+                            system.linear_solves["second_order"] = system.linear_solves.get("second_order", 0) + 1
+                            continue
                     a *= 0.5
+                    ls += 1
                 timings["line_search"] += time.perf_counter() - t_phase
                 if accepted or exact_contact:
                     break

@@ -31,8 +31,16 @@ class SolverOptions:
         on node 0; no contact, no follower loads): Newton steps in edge coordinates x_i = x_0 + sum_{j<i} e_j
         (der.solvers.edge_coordinates), whose stiffness has condition number ~ n^2 instead of ~ n^4 -- a cantilever
         of 10^5 edges converges there where the node-coordinate steps are round-off. Other scenes take
-        node-coordinate steps as usual (``result.linear_solves["edge"]`` counts the edge steps). Default False.
+        node-coordinate steps as usual (``result.linear_solves["edge"]`` counts the edge steps). Each step q = T z
+        is applied as a compensated pair (the edges' prefix sums with TwoSum), so that the edges of the step keep
+        their own rounding. With ``second_order_correction`` the correction is solved with the edge factors.
+        Default False.
     line_search_steps, armijo : backtracking halvings per pseudo-time step and the sufficient-decrease factor.
+    second_order_correction : implicit solver, rods with a stretching term, no contact: when the line search
+        refuses a full step, correct it for the elongation that the straight-line step adds to the edges it
+        turns beyond its linearisation (the chord error |d_perp|^2 / 2h, priced by the axial stiffness: the
+        Maratos effect that stalls Newton's method on a fine inextensible ring), solved with the same
+        factorisation, and search along the arc q + a delta + a^2 c. Off by default (docs/scaling.md).
     dt : explicit time step (physical time for the rod's line density rho_A); None picks ``safety / omega_max``,
         half the stability limit 2 / omega_max. A dt above the stability limit is refused with a ValueError.
     safety : fraction of the stable explicit step used.
@@ -74,6 +82,7 @@ class SolverOptions:
     dt_growth: float = 10.0
     line_search_steps: int = 10
     armijo: float = 1e-4
+    second_order_correction: bool = False
     dt: float | None = None
     safety: float = 0.9
     fire_n_min: int = 5

@@ -353,6 +353,22 @@ def ldlt_compact_solve_block(L, D, Y):
 
 
 @njit(cache=True, inline="always")
+def componentwise_ratio(r, s):
+    """max_i |r_i| / s_i over the rows of s, the componentwise backward error of a residual r against s = |A| |x| + |b| (a row whose
+    residual is 0 counts 0; one with a residual and a zero or non-finite denominator, or a non-finite residual:
+    infinity)."""
+    worst = 0.0
+    for i in range(s.shape[0]):
+        ri = abs(r[i])
+        if ri == 0.0:
+            continue
+        if not (s[i] > 0.0) or not np.isfinite(ri):
+            return np.inf
+        worst = max(worst, ri / s[i])
+    return worst
+
+
+@njit(cache=True, inline="always")
 def _band_residual(ab, kl, ku, x, rhs, r):
     """r = rhs - A x (band order, A in rows kl.. of the general-band storage) and the componentwise backward
     error max_i |r_i| / (|A| |x| + |rhs|)_i, in one pass over the band (a row whose residual is 0 counts 0; one
@@ -370,15 +386,7 @@ def _band_residual(ab, kl, ku, x, rhs, r):
             a = ab[off + i - j, j]
             r[i] -= a * xj
             s[i] += abs(a) * axj
-    worst = 0.0
-    for i in range(n):
-        ri = abs(r[i])
-        if ri == 0.0:
-            continue
-        if not (s[i] > 0.0) or not np.isfinite(ri):
-            return np.inf
-        worst = max(worst, ri / s[i])
-    return worst
+    return componentwise_ratio(r, s)
 
 
 @njit(cache=True)

@@ -228,6 +228,19 @@ def pair_barrier(x, off, dhat, kappa, mode, project, grad, hess):
 
 
 @njit(cache=True)
+def kept_pairs(pairs, keep, n):
+    """The n rows of ``pairs`` (k, 2) whose ``keep`` flag is set, in order."""
+    out = np.empty((n, 2), dtype=np.int64)
+    q = 0
+    for p in range(pairs.shape[0]):
+        if keep[p]:
+            out[q, 0] = pairs[p, 0]
+            out[q, 1] = pairs[p, 1]
+            q += 1
+    return out
+
+
+@njit(cache=True)
 def active_pairs(pos, edges, pairs, edge_radius, dhat):
     """The rows of pairs (n_pairs, 2) whose gap is below dhat (the barrier's support), so that the triplet
     buffers can be sized to the active set rather than to all candidates."""
@@ -244,14 +257,7 @@ def active_pairs(pos, edges, pairs, edge_radius, dhat):
         if np.sqrt(segment_distance2(x)) - off < dhat:
             keep[p] = True
             n += 1
-    out = np.empty((n, 2), dtype=np.int64)
-    q = 0
-    for p in range(pairs.shape[0]):
-        if keep[p]:
-            out[q, 0] = pairs[p, 0]
-            out[q, 1] = pairs[p, 1]
-            q += 1
-    return out
+    return kept_pairs(pairs, keep, n)
 
 
 @njit(cache=True)

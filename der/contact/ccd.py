@@ -25,6 +25,7 @@ Layout as in barrier.py; dpos (n_nodes, 3) is the displacement of the full step.
 import numpy as np
 from numba import njit
 
+from .barrier import kept_pairs
 from .distance import segment_distance2
 
 
@@ -163,11 +164,4 @@ def reach_pairs(pos0, reach, edges, pairs, edge_radius, dhat):
         if np.sqrt(segment_distance2(x)) - edge_radius[ea] - edge_radius[eb] - move < dhat:
             keep[p] = True
             n += 1
-    out = np.empty((n, 2), dtype=np.int64)
-    q = 0
-    for p in range(pairs.shape[0]):
-        if keep[p]:
-            out[q, 0] = pairs[p, 0]
-            out[q, 1] = pairs[p, 1]
-            q += 1
-    return out
+    return kept_pairs(pairs, keep, n)

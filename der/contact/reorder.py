@@ -14,6 +14,8 @@ four DOFs together.
 import numpy as np
 from numba import njit
 
+from ..linalg import componentwise_ratio
+
 
 def block_order(ab, kl, ku, perm, rows, cols):
     """RCM permutation of the DOF blocks (4 DOFs each) for the band ``ab`` (LAPACK layout, DOF -> position
@@ -251,15 +253,7 @@ def residual(ab, kl, ku, perm, rows, cols, vals, x, rhs, r):
         xj = x[cols[k]]
         r[rows[k]] -= a * xj
         s[rows[k]] += abs(a) * abs(xj)
-    worst = 0.0
-    for i in range(n):
-        ri = abs(r[i])
-        if ri == 0.0:
-            continue
-        if not (s[i] > 0.0) or not np.isfinite(ri):
-            return np.inf
-        worst = max(worst, ri / s[i])
-    return worst
+    return componentwise_ratio(r, s)
 
 
 def cholesky_solve(ab, kl, ku, perm, rows, cols, vals, rhs, newpos, kd, chol, tol):

@@ -37,7 +37,7 @@ of an open rod (it carries its end node as a sample), else 0.
 import numpy as np
 from numba import njit
 
-from .barrier import barrier, barrier_first_derivative, barrier_second_derivative
+from .barrier import barrier, barrier_first_derivative, barrier_second_derivative, kept_pairs
 
 
 @njit(cache=True)
@@ -177,14 +177,7 @@ def sampled_active_pairs(pos, edges, pairs, edge_radius, edge_len, owns_end, m, 
                 break
         if keep[k]:
             n += 1
-    out = np.empty((n, 2), dtype=np.int64)
-    j = 0
-    for k in range(pairs.shape[0]):
-        if keep[k]:
-            out[j, 0] = pairs[k, 0]
-            out[j, 1] = pairs[k, 1]
-            j += 1
-    return out
+    return kept_pairs(pairs, keep, n)
 
 
 @njit(cache=True)

@@ -35,7 +35,7 @@ class EdgeCoordinates:
 
     def __init__(self, system, state, mass=None):
         rod = system.rod
-        self.N = N = rod.n_nodes
+        self.N = rod.n_nodes
         self.n_dof = n_dof = rod.n_dof
         fixed = np.zeros(n_dof, dtype=bool)
         fixed[3::4] = system.fixed[3::4]            # edge angles (fix_theta, clamps) and the dummy slot

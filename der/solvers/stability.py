@@ -94,11 +94,11 @@ import numpy as np
 from numba import njit
 
 from ..linalg import (BandLU, add_diagonal, band_ldlt, band_ldlt_compact, band_ldlt_solve, band_ldlt_solve_inplace,
-                      band_matvec, band_negative_pivots, band_to_sparse, condense_band, constrain_band, dot, dot_abs,
+                      band_matvec, band_negative_pivots, band_to_sparse, condense_band, constrain_band,
                       ldlt_compact_solve_block)
 from ..loads import DistributedForce, EndForce, EndTorque, PointForce, TwistingMoment
 from .edge_coordinates import EDGE_BAND, EDGE_CHECK_TOL, EdgeCoordinates, band_asymmetry, edge_eligible
-from .system import condense_forces, condense_system_band, evaluate_system, rotational_inertia, take_hessian
+from .system import condense_system_band, evaluate_system, rotational_inertia, take_hessian
 
 DENSE_MAX_DOFS = 300   # dense eigen-solver only for small systems
 EDGE_METHOD = "edge shift-invert"
@@ -598,6 +598,20 @@ def _edge_eigen(ez, abz_raw, k):
         abz_raw[:, cols] = saved
 
 
+def _test_solve_is_round_off(ez, abz, solve):
+    """Whether ``solve`` (the factors of the edge band ``abz``) answers a random right-hand side on the free z with
+    a componentwise backward error at round-off level (1e-10): the acceptance test of an unpivoted LDL^T."""
+    b = np.random.default_rng(0).standard_normal(ez.n_dof)
+    b[ez.fixed] = 0.0
+    xs = solve(b)
+    kx = np.empty(ez.n_dof)
+    ka = np.empty(ez.n_dof)
+    band_matvec(abz, EDGE_BAND, EDGE_BAND, ez.perm, xs, kx, False)
+    band_matvec(abz, EDGE_BAND, EDGE_BAND, ez.perm, xs, ka, True)
+    free = ~ez.fixed
+    return bool(np.abs(kx - b)[free].max() <= 1e-10 * (ka + np.abs(b))[free].max())
+
+
 def _edge_eigen_factorised(ez, work, k):
     """``_edge_eigen`` on ``work`` (K_e, modified in place: links condensed, held slots identity)."""
     from ..linalg import BandLDLT
@@ -612,17 +626,12 @@ def _edge_eigen_factorised(ez, work, k):
         return None
     if neg > 0:
         # backward error of a test solve at round-off level, else refused (no pivoting on an indefinite matrix)
-        b = np.random.default_rng(0).standard_normal(ez.n_dof)
-        b[ez.fixed] = 0.0
-        xs = b.copy()[:, None]
-        ldlt_compact_solve_block(f.L, f.D, xs)
-        xs = np.ascontiguousarray(xs[:, 0])
-        kx = np.empty(ez.n_dof)
-        ka = np.empty(ez.n_dof)
-        band_matvec(work, EDGE_BAND, EDGE_BAND, ez.perm, xs, kx, False)
-        band_matvec(work, EDGE_BAND, EDGE_BAND, ez.perm, xs, ka, True)
-        free = ~ez.fixed
-        if not (np.abs(kx - b)[free].max() <= 1e-10 * (ka + np.abs(b))[free].max()):
+        def solve(b):
+            xs = b.copy()[:, None]
+            ldlt_compact_solve_block(f.L, f.D, xs)
+            return np.ascontiguousarray(xs[:, 0])
+
+        if not _test_solve_is_round_off(ez, work, solve):
             return None
     got = _edge_block_lanczos(ez, f.L, f.D, k)
     if got is not None:
@@ -644,15 +653,7 @@ def _edge_lowest(ez, abz, k, tol=1e-10):
     if neg < 0:
         return None
     # backward error of a test solve at round-off level, else refused (no pivoting on an indefinite matrix)
-    b = np.random.default_rng(0).standard_normal(ez.n_dof)
-    b[ez.fixed] = 0.0
-    xs = band_ldlt_solve(L, D, ez.perm, b)
-    kx = np.empty(ez.n_dof)
-    ka = np.empty(ez.n_dof)
-    band_matvec(abz, EDGE_BAND, EDGE_BAND, ez.perm, xs, kx, False)
-    band_matvec(abz, EDGE_BAND, EDGE_BAND, ez.perm, xs, ka, True)
-    free = ~ez.fixed
-    if not (np.abs(kx - b)[free].max() <= 1e-10 * (ka + np.abs(b))[free].max()):
+    if not _test_solve_is_round_off(ez, abz, lambda b: band_ldlt_solve(L, D, ez.perm, b)):
         return None
     args = (L, D, ez.massive, ez.root, ez.fixed, ez.tri_dep, ez.tri_master, ez.tri_coef, ez.N)
     n_m = ez.massive.size

@@ -302,16 +302,15 @@ def contact_force_scale(system):
 def _edges_within_supports(system):
     """The edges whose two nodes are both held by the supports (every position coordinate fixed or a dependent of
     the end supports' links), as indices; cached for the system's current ``fixed`` and ``links``."""
-    key = (id(system.fixed), id(system.links))
     cached = getattr(system, "_held_edges", None)
-    if cached is not None and cached[0] == key:
-        return cached[1]
+    if cached is not None and cached[0] is system.fixed and cached[1] is system.links:
+        return cached[2]
     rod = system.rod
     held_dof = system.fixed.copy()
     held_dof[system.links.dep] = True
     node = held_dof.reshape(-1, 4)[:, :3].all(axis=1)
     edges = np.flatnonzero(node[rod.edge_nodes[:, 0]] & node[rod.edge_nodes[:, 1]])
-    system._held_edges = (key, edges)
+    system._held_edges = (system.fixed, system.links, edges)   # the objects themselves: no reused id()
     return edges
 
 
@@ -596,7 +595,7 @@ def _edge_newton_correction(system, state):
     small enough to certify it "converged_at_floor" (issue 11; tests/test_verdicts.py)."""
     from .edge_coordinates import EdgeNewton, edge_eligible
 
-    if not edge_eligible(system) or symmetry_free(system, state):
+    if not edge_eligible(system) or has_symmetry_modes(system, state):
         return None
     edge = EdgeNewton(system, state)
     if not edge.prepare(system.ab, system.kl, system.ku):
@@ -610,7 +609,7 @@ def _edge_newton_correction(system, state):
     return delta
 
 
-def symmetry_free(system, state):
+def has_symmetry_modes(system, state):
     """Whether the scene has symmetry modes (``stability.symmetry_modes``), which the edge path does not remove."""
     from .stability import symmetry_modes
 

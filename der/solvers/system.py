@@ -495,6 +495,48 @@ def residual_floor(system, state, scales):
     return residual_norm(system, floor_forces(system, state), scales)
 
 
+def potential_round_off(system, state, forces):
+    """A bound on the rounding error of the potential E - f_ext . q as the implicit solver evaluates it at ``state``
+    (energy units), from the edge forces and vertex moments of the same evaluation (``forces``: the second value of
+    ``evaluate_forces``); None without them (several rods, contact terms: their energies come without edge forces)
+    or without compensated coordinates. Each edge is formed from compensated coordinates to its own rounding
+    eps |e_j| and each angle to eps max(|theta|, 1) (``rounding_scale``): the energy moves by at most
+    |dE/de_j| eps |e_j| per edge and the vertex moment times eps max(|theta|, 1) per vertex, each rounding counted
+    FLOOR_ROUNDINGS times; the load work f_ext . q, formed on the high parts of q, by eps |f_ext| |q|. A fall of
+    the potential by more than this at both of its ends is the potential's own, whatever forces chose the step."""
+    if forces is None or state.q_lo is None:
+        return None
+    F, M = forces
+    rod = system.rod
+    return float(np.finfo(float).eps * _potential_rounding(F, M, state.q, system.fext, rod.edge_nodes,
+                                                           rod.vertex_edges, FLOOR_ROUNDINGS))
+
+
+@njit(cache=True)
+def _potential_rounding(F, M, q, fext, edge_nodes, vertex_edges, roundings):
+    """roundings (sum_j |F_j| |e_j| + sum_v M_v max(1, |theta_a|, |theta_b|)) + sum_i |f_ext,i| |q_i|
+    (``potential_round_off``)."""
+    s = 0.0
+    for j in range(edge_nodes.shape[0]):
+        a = 4 * edge_nodes[j, 0]
+        b = 4 * edge_nodes[j, 1]
+        e2 = 0.0
+        f2 = 0.0
+        for i in range(3):
+            d = q[b + i] - q[a + i]
+            e2 += d * d
+            f2 += F[j, i] * F[j, i]
+        s += np.sqrt(f2 * e2)
+    for v in range(M.shape[0]):
+        ta = abs(q[4 * vertex_edges[v, 0] + 3])
+        tb = abs(q[4 * vertex_edges[v, 1] + 3])
+        s += M[v] * max(1.0, ta, tb)
+    w = 0.0
+    for i in range(q.shape[0]):
+        w += abs(fext[i]) * abs(q[i])
+    return roundings * s + w
+
+
 def newton_steps(system, state, rhs):
     """Newton corrections K^-1 r for the columns of ``rhs`` (n_dof, k) at ``state`` (one factorisation; needs
     ``system.ab`` evaluated at ``state``), on the free variables of the constraints and expanded to q. Symmetry

@@ -350,6 +350,14 @@ def fit(rows, key):
     return float(np.polyfit(x, y, 1)[0])
 
 
+def _baseline():
+    """``--baseline``: the paths this round replaced, kept as switches for side-by-side runs -- every refused
+    LDL^T waits LDLT_RETRY_AFTER band solves (now an indefinite matrix is tried again at the next solve)."""
+    from der import linalg
+
+    linalg.LDLT_RETRY_INDEFINITE = False
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, nargs="+", default=[100, 300, 1000, 3000, 10000, 30000, 100000])
@@ -371,9 +379,14 @@ def main(argv=None):
     ap.add_argument("--edge-newton", action="store_true",
                     help="solve with SolverOptions(edge_newton=True) (Newton steps of an open rod held at its "
                          "start in edge coordinates; the helix between two clamps is not eligible)")
+    ap.add_argument("--baseline", action="store_true",
+                    help="the solver's paths before this round's changes to the million-edge run (issue 17), for "
+                         "before/after comparisons in one command: see _baseline")
     ap.add_argument("--time-budget", type=float, default=120.0,
                     help="wall-clock budget of each solve in seconds (default 120; a loaded machine may need more)")
     args = ap.parse_args(argv)
+    if args.baseline:
+        _baseline()
     if args.png:
         from der.plotting import require_matplotlib
         try:
@@ -407,7 +420,8 @@ def main(argv=None):
             out = subprocess.run([sys.executable, __file__, "--single", problem, str(n), "--time-budget",
                                   str(args.time_budget)]
                                  + (["--second-order-correction"] if args.second_order_correction else [])
-                                 + (["--edge-newton"] if args.edge_newton else []),
+                                 + (["--edge-newton"] if args.edge_newton else [])
+                                 + (["--baseline"] if args.baseline else []),
                                  capture_output=True, text=True)
             try:
                 r = json.loads(out.stdout.strip().splitlines()[-1])
@@ -477,7 +491,8 @@ def setup_table(args):
 def million(args):
     """The 10^6-edge helix (stretched and overwound between clamps) in a fresh process."""
     out = subprocess.run([sys.executable, __file__, "--single", "helix_winding", "1000000", "--no-trace",
-                          "--time-budget", str(args.time_budget)], capture_output=True, text=True)
+                          "--time-budget", str(args.time_budget)] + (["--baseline"] if args.baseline else []),
+                         capture_output=True, text=True)
     try:
         r = json.loads(out.stdout.strip().splitlines()[-1])
     except (ValueError, IndexError):

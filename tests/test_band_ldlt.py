@@ -146,6 +146,34 @@ def test_an_indefinite_matrix_refused_does_not_hold_back_the_next_solve():
     assert work.refusals == 0
 
 
+def test_the_factor_lives_in_the_spare_rows_of_the_band():
+    """band_solve's LDL^T keeps L in the kl spare rows of the general-band storage (dgbsv's fill-in rows): no
+    second n x kl array (320 MB at 10^6 edges). The band's matrix rows are untouched, so a second right-hand side
+    is solved with the same factors (band_resolve), and a refused matrix still goes to dgbsv correctly."""
+    from der.linalg import band_resolve
+
+    rng = np.random.default_rng(6)
+    n, b = 90, 10
+    A = random_band(n, b, rng, 3.0 * b)
+    ab = dense_to_band(A, b, b)
+    matrix_rows = ab[b:, :].copy()
+    work = BandLDLT(n, b)
+    r1, r2 = rng.standard_normal(n), rng.standard_normal(n)
+    x1, info = band_solve(ab, b, b, np.arange(n), r1, ldlt=work)
+    assert info == 0 and work.accepted
+    assert np.shares_memory(work.L, ab) and np.array_equal(ab[b:, :], matrix_rows)
+    assert np.array_equal(work.L, ab[:b, :].T)
+    x2 = band_resolve(ab, b, b, np.arange(n), r2, work)
+    assert np.allclose(A @ x1, r1, atol=1e-12) and np.allclose(A @ x2, r2, atol=1e-12)
+    # the same solution as a separate factor gives, bitwise
+    linalg.LDLT_IN_BAND = False
+    try:
+        y1, _ = band_solve(dense_to_band(A, b, b), b, b, np.arange(n), r1, ldlt=BandLDLT(n, b))
+    finally:
+        linalg.LDLT_IN_BAND = True
+    assert np.array_equal(x1, y1)
+
+
 def test_newton_solve_of_a_rod_uses_ldlt_and_keeps_its_inertia():
     """A clamped helix (symmetric Newton matrix up to the frame-transport term): the implicit solver's band
     solves are accepted LDL^T ones, and system.ldlt holds the last factorisation."""

@@ -352,10 +352,12 @@ def fit(rows, key):
 
 def _baseline():
     """``--baseline``: the paths this round replaced, kept as switches for side-by-side runs -- every refused
-    LDL^T waits LDLT_RETRY_AFTER band solves (now an indefinite matrix is tried again at the next solve)."""
+    LDL^T waits LDLT_RETRY_AFTER band solves (now an indefinite matrix is tried again at the next solve), and the
+    LDL^T factor L is a separate n x kl array (now in the band's spare rows)."""
     from der import linalg
 
     linalg.LDLT_RETRY_INDEFINITE = False
+    linalg.LDLT_IN_BAND = False
 
 
 def main(argv=None):

@@ -204,6 +204,7 @@ def single(problem, n, time_budget=120.0, trace=True, second_order_correction=Fa
            "residual_floor": floor, **noise, "message": res.message, "error": error(res.state),
            "rss_growth_mb": (peak_rss - base_rss) / 1024.0, "peak_rss_mb": peak_rss / 1024.0,
            "rss_per_edge_kb": (peak_rss - base_rss) / n, "compile_s": compile_s, "band_solves": band_solves,
+           "numpy_madvise_hugepage": os.environ.get("NUMPY_MADVISE_HUGEPAGE", "default"),
            **{f"{k}_s": v for k, v in res.timings.items()}}
     if not trace:
         return out
@@ -350,6 +351,14 @@ def fit(rows, key):
     return float(np.polyfit(x, y, 1)[0])
 
 
+def _child_env(args):
+    """The environment of a solve's child process (``--no-hugepages``: NumPy's huge-page advice off)."""
+    env = dict(os.environ)
+    if getattr(args, "no_hugepages", False):
+        env["NUMPY_MADVISE_HUGEPAGE"] = "0"
+    return env
+
+
 def _baseline():
     """``--baseline``: the paths this round replaced, kept as switches for side-by-side runs -- every refused
     LDL^T waits LDLT_RETRY_AFTER band solves (now an indefinite matrix is tried again at the next solve), and the
@@ -384,6 +393,10 @@ def main(argv=None):
     ap.add_argument("--baseline", action="store_true",
                     help="the solver's paths before this round's changes to the million-edge run (issue 17), for "
                          "before/after comparisons in one command: see _baseline")
+    ap.add_argument("--no-hugepages", action="store_true",
+                    help="run the solves' processes with NUMPY_MADVISE_HUGEPAGE=0 (NumPy's transparent-huge-page "
+                         "advice off): on the measuring VM the first touch of fresh huge pages cost ~3.3 s of "
+                         "system time per GB against 1.2-2.5 s for 4 kB pages (docs/scaling.md)")
     ap.add_argument("--time-budget", type=float, default=120.0,
                     help="wall-clock budget of each solve in seconds (default 120; a loaded machine may need more)")
     args = ap.parse_args(argv)
@@ -424,7 +437,7 @@ def main(argv=None):
                                  + (["--second-order-correction"] if args.second_order_correction else [])
                                  + (["--edge-newton"] if args.edge_newton else [])
                                  + (["--baseline"] if args.baseline else []),
-                                 capture_output=True, text=True)
+                                 capture_output=True, text=True, env=_child_env(args))
             try:
                 r = json.loads(out.stdout.strip().splitlines()[-1])
             except (ValueError, IndexError):
@@ -494,7 +507,7 @@ def million(args):
     """The 10^6-edge helix (stretched and overwound between clamps) in a fresh process."""
     out = subprocess.run([sys.executable, __file__, "--single", "helix_winding", "1000000", "--no-trace",
                           "--time-budget", str(args.time_budget)] + (["--baseline"] if args.baseline else []),
-                         capture_output=True, text=True)
+                         capture_output=True, text=True, env=_child_env(args))
     try:
         r = json.loads(out.stdout.strip().splitlines()[-1])
     except (ValueError, IndexError):

@@ -2,7 +2,7 @@
 memory of the implicit solver from n = 100 to 100,000 edges (and a million with ``--million``).
 
     python tools/scaling.py [--json] [--n 100 1000 10000 100000] [--png PATH]
-    python tools/scaling.py --million [--json]
+    python tools/scaling.py --million [--json] [--baseline] [--no-hugepages]
     python tools/scaling.py --setup [--n ...] [--json]     (the set-up alone: no solve)
 
 Two problems: ring torsion (scenarios/ring_torsion.py: an arc clamped at one end, end torque; solved from the

@@ -4,9 +4,9 @@ The stiffness of an open rod is banded in the interleaved DOF order (half-bandwi
 11 consecutive DOFs). A ring wraps around; reordering its nodes as 0, N-1, 1, N-2, 2, ... ("folding" the ring)
 makes it banded again with half-bandwidth 19. Matrices are kept in LAPACK general-band storage
 ``ab[kl + ku + i - j, j] = A[i, j]`` (with ``kl`` spare rows for pivoting); ``band_solve`` factorises a band
-with kl = ku by LDL^T without pivoting of its symmetric lower triangle (a quarter of the flops of banded LU),
-refines the solution against the band and accepts it on its componentwise backward error, else solves with
-LAPACK's ``dgbsv`` (issue 17). Nothing is ever dense.
+with kl = ku by LDL^T without pivoting of its symmetric lower triangle (a quarter of the flops of banded LU; the
+factor kept in the kl spare rows), refines the solution against the band and accepts it on its componentwise
+backward error, else solves with LAPACK's ``dgbsv`` (issue 17). Nothing is ever dense.
 """
 import numpy as np
 from numba import njit
@@ -127,6 +127,17 @@ def add_diagonal(ab, kl, ku, perm, values, scale):
 
 
 @njit(cache=True)
+def band_diagonal_abs(ab, kl, ku, perm, out):
+    """out[d] = |A_dd| for the band matrix in original DOF order (the implicit solver's damping diagonal): one
+    entry per column of the Fortran-ordered band. (``np.take`` of the band's diagonal row, strided by 2 kl + ku + 1
+    doubles, cost 0.16 s per call at 10^6 edges, 6x this loop.)"""
+    off = kl + ku
+    for d in range(perm.shape[0]):
+        out[d] = abs(ab[off, perm[d]])
+    return out
+
+
+@njit(cache=True)
 def band_matvec(ab, kl, ku, perm, x, out, absolute=False):
     """out = A x (or |A| |x| with ``absolute``) for the band matrix in original DOF order."""
     n = ab.shape[1]
@@ -198,24 +209,45 @@ def band_to_sparse(ab, kl, ku, perm):
 # another point of its nearly free sliding valley, and the supercoiled ring of test_contact_perf at twist 8 took
 # 500 iterations instead of 49): paths through nearly free modes follow the linear solve's rounding, so a solution
 # is accepted only at 1e-15, as accurate as LAPACK's on such matrices. Measured: the helix's Newton solves pass
-# at 10^4 edges (3 of 3), not at 10^5 (its start matrix is refused, then dgbsv).
+# at 10^4 edges (3 of 3); at 10^5 and 10^6 its start matrix (311 and 3111 negative pivots) is refused -- refined
+# LDL^T stops at 4.9e-14 at 10^5, where dgbsv reaches 1.9e-11 (2.4e-16 after one refinement with its own
+# factors), and at 1.3e-11 at 10^6 -- and the next ones, positive definite, pass after one refinement (3e-16);
+# a threshold of dgbsv's level would change nothing at 10^6. See LDLT_RETRY_AFTER.
 LDLT_BACKWARD_ERROR = 1e-15
 LDLT_REFINEMENTS = 3
 # after a refused LDL^T, a band_solve with the same BandLDLT goes straight to dgbsv this many times before it
 # tries again: a Newton matrix whose skew part defeats refinement (the load stiffness of an end torque on a ring
-# against its soft modes) stays so from iteration to iteration, and each refusal costs about one dgbsv
+# against its soft modes) stays so from iteration to iteration, and each refusal costs about one dgbsv. The first
+# refusal of an indefinite matrix refined to within LDLT_RETRY_BELOW (near LAPACK's own unrefined backward error on
+# such matrices, 5e-12 - 2e-11: the growth of its negative pivots, not a skew part, stopped the refinement) is
+# instead followed by a new attempt at the next solve: Newton's matrices turn positive definite as it nears a
+# stable equilibrium (the wound helix: its start matrix, with 311 negative pivots at 10^5 edges and 3111 at 10^6,
+# is refined to 1e-13 and 1.3e-11 and refused; the next ones have none and pass after one refinement, a
+# factorisation 6x cheaper than dgbsv's at 10^5). The ring under an end torque (1 negative pivot, refinement
+# stuck at 8.5e-9 at 10^4 edges: its skew part) keeps waiting, as does a second refusal in a row.
 LDLT_RETRY_AFTER = 8
+LDLT_RETRY_BELOW = 1e-10
+# False: every refusal waits LDLT_RETRY_AFTER solves (the code before; tools/scaling.py --baseline)
+LDLT_RETRY_INDEFINITE = True
 # which solver each band_solve used: the symmetric LDL^T (accepted), or dgbsv (by design: kl != ku, or after
 # the LDL^T was refused: a zero pivot or a backward error that refinement did not bring down)
 BAND_SOLVES = {"ldlt": 0, "dgbsv": 0, "ldlt_refused": 0}
 # False: band_solve always uses dgbsv (the comparison runs of tools/bench_kernels.py and tools/scaling.py)
 USE_LDLT = True
+# band_solve keeps the unit lower factor L in the kl spare rows of the general-band storage (rows 0..kl-1, which
+# dgbsv needs for its fill-in and ignores on entry; L[j, s - 1] = ab[s - 1, j], each column of the factor still
+# contiguous): no second n x kl array (10^6 edges: 320 MB less at the peak, and no first touch of it), the
+# solves ~1.3x slower (a column every 2 kl + ku + 1 doubles; measured 0.33 against 0.26 s for a refined solve at
+# 4 10^6 unknowns, bitwise the same solution). False: a separate compact L (the code before; --baseline)
+LDLT_IN_BAND = True
 
 
 class BandLDLT:
     """Work arrays of the symmetric band factorisation ``band_ldlt_compact`` for matrices of ``n`` rows and
     half-bandwidth ``b`` (allocated by the first solve that uses them), reused from solve to solve
-    (``band_solve(..., ldlt=...)``: no allocation, and no first touch of fresh pages, per Newton iteration). After a solve that used it: ``L``, ``D`` the factors of the
+    (``band_solve(..., ldlt=...)``: no allocation, and no first touch of fresh pages, per Newton iteration; with
+    LDLT_IN_BAND ``L`` is a view of the band's spare rows, valid until the band is assembled or factorised
+    again). After a solve that used it: ``L``, ``D`` the factors of the
     symmetric part of the last matrix factorised (in band order) and ``negatives`` its number of negative
     pivots (= negative eigenvalues, Sylvester's law of inertia), ``accepted`` whether its solution passed the
     backward-error test (else the solve went to dgbsv), ``backward_error`` the error reached."""
@@ -227,6 +259,7 @@ class BandLDLT:
         self.accepted = False
         self.backward_error = np.inf
         self.skip = 0           # band solves left to send straight to dgbsv after a refusal (LDLT_RETRY_AFTER)
+        self.refusals = 0       # LDL^T attempts refused since the last accepted one
         # which factors the last band_solve left for band_resolve: "ldlt" (L, D; the band untouched), "dgbsv"
         # (the LU factors in the band itself, their pivots in ``piv``) or None
         self.factors = None
@@ -238,9 +271,21 @@ class BandLDLT:
         self.L = self.D = self.r = self.x = None
         self.factors = self.piv = self.lu = None
 
+    def in_band(self, ab, b):
+        """The work arrays for the band ``ab`` (general-band storage, ``b`` = kl = ku) with L in its spare rows
+        (LDLT_IN_BAND): ``L`` a view, D and the solve's vectors allocated if missing or of another size."""
+        n = ab.shape[1]
+        if self.D is None or self.D.shape[0] != n:
+            self.D = np.empty(n)
+            self.r = np.empty(n)
+            self.x = np.empty(n)
+        self.n, self.b = n, b
+        self.L = ab[:b, :].T
+
     def ensure(self, n, b):
-        """The work arrays for ``n`` rows and half-bandwidth ``b`` (allocated if missing or of another size)."""
-        if self.L is None or self.L.shape != (n, b):
+        """The work arrays for ``n`` rows and half-bandwidth ``b`` (allocated if missing or of another size, or
+        if ``L`` is a view of a band's spare rows: ``in_band``)."""
+        if self.L is None or self.L.shape != (n, b) or not self.L.flags.c_contiguous:
             self.n, self.b = n, b
             self.L = np.empty((n, b))    # L[j, s - 1] = l_{j+s, j}: column j of the unit lower factor, contiguous
             self.D = np.empty(n)
@@ -457,7 +502,10 @@ def band_solve(ab, kl, ku, perm, rhs, overwrite=True, ldlt=None):
     elif USE_LDLT and kl == ku and ab.shape[0] == 2 * kl + ku + 1 and n > 0:
         if ldlt is None:
             ldlt = BandLDLT(n, kl)
-        ldlt.ensure(n, kl)
+        if LDLT_IN_BAND:
+            ldlt.in_band(ab, kl)
+        else:
+            ldlt.ensure(n, kl)
         ldlt.accepted, ldlt.backward_error = False, np.inf
         ldlt.factors, ldlt.piv = None, None
         ldlt.negatives = band_ldlt_compact(ab, kl, ku, ldlt.L, ldlt.D)
@@ -478,11 +526,20 @@ def band_solve(ab, kl, ku, perm, rhs, overwrite=True, ldlt=None):
             if worst <= LDLT_BACKWARD_ERROR:
                 ldlt.accepted = True
                 ldlt.factors = "ldlt"
+                ldlt.refusals = 0
                 BAND_SOLVES["ldlt"] += 1
                 return xs.reshape(rhs.shape), 0
         BAND_SOLVES["ldlt_refused"] += 1
-        ldlt.skip = LDLT_RETRY_AFTER
-        ldlt.release()
+        ldlt.refusals += 1
+        # an indefinite matrix refused for the first time, refined near LAPACK's own accuracy (the factor's
+        # growth, not a skew part, stopped it): try again at the next solve (LDLT_RETRY_AFTER)
+        retry = (LDLT_RETRY_INDEFINITE and ldlt.negatives > 0 and ldlt.backward_error <= LDLT_RETRY_BELOW
+                 and ldlt.refusals == 1)
+        ldlt.skip = 0 if retry else LDLT_RETRY_AFTER
+        if ldlt.skip > 0 or not LDLT_IN_BAND:
+            ldlt.release()
+        else:       # tried again at the next solve: its vectors kept (no first touch again), L's rows go to dgbsv
+            ldlt.L = None
     b = np.empty_like(rhs)
     b[perm] = rhs
     BAND_SOLVES["dgbsv"] += 1

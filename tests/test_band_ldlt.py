@@ -108,13 +108,68 @@ def test_zero_pivot_and_large_skew_fall_back_to_dgbsv():
     x, info = band_solve(dense_to_band(B, b, b), b, b, np.arange(n), rhs, ldlt=work)
     assert delta(c0)["dgbsv"] == 1 and delta(c0)["ldlt"] == 0
     assert np.allclose(B @ x, rhs, atol=1e-9 * np.abs(B).max() * np.abs(x).max())
-    # the next solves with the same work arrays go straight to dgbsv, then LDL^T is tried again
+    # the next solves with the same work arrays go straight to dgbsv (refinement did not contract: a skew part,
+    # which stays from one Newton matrix to the next), then LDL^T is tried again
     assert work.skip == linalg.LDLT_RETRY_AFTER
     C = dense_to_band(random_band(n, b, rng, 3.0 * b), b, b)
     c0 = counts()
     for _ in range(linalg.LDLT_RETRY_AFTER + 1):
         band_solve(C.copy(order="F"), b, b, np.arange(n), rhs, ldlt=work)
     assert delta(c0) == {"ldlt": 1, "dgbsv": linalg.LDLT_RETRY_AFTER, "ldlt_refused": 0}
+
+
+def test_an_indefinite_matrix_refused_does_not_hold_back_the_next_solve(monkeypatch):
+    """Newton's start matrix may be indefinite and refused (the wound helix at 10^5 edges: 311 negative pivots,
+    refinement stops at 1e-13), its next ones positive definite near a stable equilibrium: the solve after the
+    first refusal of an indefinite matrix refined to within LDLT_RETRY_BELOW tries LDL^T again (before:
+    LDLT_RETRY_AFTER solves went to dgbsv). (At n = 60 refinement reaches 1e-16: the threshold is set below that
+    for the refusal.)"""
+    rng = np.random.default_rng(5)
+    n, b = 60, 10
+    B = random_band(n, b, rng, 0.0)
+    B[0, 0] = 1e-8                                 # indefinite, a small first pivot: growth
+    rhs = rng.standard_normal(n)
+    work = BandLDLT(n, b)
+    c0 = counts()
+    monkeypatch.setattr(linalg, "LDLT_BACKWARD_ERROR", 1e-30)
+    band_solve(dense_to_band(B, b, b), b, b, np.arange(n), rhs, ldlt=work)
+    monkeypatch.setattr(linalg, "LDLT_BACKWARD_ERROR", 1e-15)
+    assert delta(c0) == {"ldlt": 0, "dgbsv": 1, "ldlt_refused": 1} and work.negatives > 0
+    assert work.skip == 0
+    A = random_band(n, b, rng, 3.0 * b)            # positive definite
+    c0 = counts()
+    x, info = band_solve(dense_to_band(A, b, b), b, b, np.arange(n), rhs, ldlt=work)
+    assert info == 0 and delta(c0) == {"ldlt": 1, "dgbsv": 0, "ldlt_refused": 0} and work.accepted
+    assert np.allclose(A @ x, rhs, atol=1e-12 * np.abs(A).max() * np.abs(x).max())
+    assert work.refusals == 0
+
+
+def test_the_factor_lives_in_the_spare_rows_of_the_band():
+    """band_solve's LDL^T keeps L in the kl spare rows of the general-band storage (dgbsv's fill-in rows): no
+    second n x kl array (320 MB at 10^6 edges). The band's matrix rows are untouched, so a second right-hand side
+    is solved with the same factors (band_resolve), and a refused matrix still goes to dgbsv correctly."""
+    from der.linalg import band_resolve
+
+    rng = np.random.default_rng(6)
+    n, b = 90, 10
+    A = random_band(n, b, rng, 3.0 * b)
+    ab = dense_to_band(A, b, b)
+    matrix_rows = ab[b:, :].copy()
+    work = BandLDLT(n, b)
+    r1, r2 = rng.standard_normal(n), rng.standard_normal(n)
+    x1, info = band_solve(ab, b, b, np.arange(n), r1, ldlt=work)
+    assert info == 0 and work.accepted
+    assert np.shares_memory(work.L, ab) and np.array_equal(ab[b:, :], matrix_rows)
+    assert np.array_equal(work.L, ab[:b, :].T)
+    x2 = band_resolve(ab, b, b, np.arange(n), r2, work)
+    assert np.allclose(A @ x1, r1, atol=1e-12) and np.allclose(A @ x2, r2, atol=1e-12)
+    # the same solution as a separate factor gives, bitwise
+    linalg.LDLT_IN_BAND = False
+    try:
+        y1, _ = band_solve(dense_to_band(A, b, b), b, b, np.arange(n), r1, ldlt=BandLDLT(n, b))
+    finally:
+        linalg.LDLT_IN_BAND = True
+    assert np.array_equal(x1, y1)
 
 
 def test_newton_solve_of_a_rod_uses_ldlt_and_keeps_its_inertia():

@@ -2,7 +2,7 @@
 memory of the implicit solver from n = 100 to 100,000 edges (and a million with ``--million``).
 
     python tools/scaling.py [--json] [--n 100 1000 10000 100000] [--png PATH]
-    python tools/scaling.py --million [--json]
+    python tools/scaling.py --million [--json] [--baseline] [--no-hugepages]
     python tools/scaling.py --setup [--n ...] [--json]     (the set-up alone: no solve)
 
 Two problems: ring torsion (scenarios/ring_torsion.py: an arc clamped at one end, end torque; solved from the
@@ -204,6 +204,7 @@ def single(problem, n, time_budget=120.0, trace=True, second_order_correction=Fa
            "residual_floor": floor, **noise, "message": res.message, "error": error(res.state),
            "rss_growth_mb": (peak_rss - base_rss) / 1024.0, "peak_rss_mb": peak_rss / 1024.0,
            "rss_per_edge_kb": (peak_rss - base_rss) / n, "compile_s": compile_s, "band_solves": band_solves,
+           "numpy_madvise_hugepage": os.environ.get("NUMPY_MADVISE_HUGEPAGE", "default"),
            **{f"{k}_s": v for k, v in res.timings.items()}}
     if not trace:
         return out
@@ -350,6 +351,24 @@ def fit(rows, key):
     return float(np.polyfit(x, y, 1)[0])
 
 
+def _child_env(args):
+    """The environment of a solve's child process (``--no-hugepages``: NumPy's huge-page advice off)."""
+    env = dict(os.environ)
+    if getattr(args, "no_hugepages", False):
+        env["NUMPY_MADVISE_HUGEPAGE"] = "0"
+    return env
+
+
+def _baseline():
+    """``--baseline``: the paths this round replaced, kept as switches for side-by-side runs -- every refused
+    LDL^T waits LDLT_RETRY_AFTER band solves (now an indefinite matrix is tried again at the next solve), and the
+    LDL^T factor L is a separate n x kl array (now in the band's spare rows)."""
+    from der import linalg
+
+    linalg.LDLT_RETRY_INDEFINITE = False
+    linalg.LDLT_IN_BAND = False
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, nargs="+", default=[100, 300, 1000, 3000, 10000, 30000, 100000])
@@ -371,9 +390,18 @@ def main(argv=None):
     ap.add_argument("--edge-newton", action="store_true",
                     help="solve with SolverOptions(edge_newton=True) (Newton steps of an open rod held at its "
                          "start in edge coordinates; the helix between two clamps is not eligible)")
+    ap.add_argument("--baseline", action="store_true",
+                    help="the solver's paths before this round's changes to the million-edge run (issue 17), for "
+                         "before/after comparisons in one command: see _baseline")
+    ap.add_argument("--no-hugepages", action="store_true",
+                    help="run the solves' processes with NUMPY_MADVISE_HUGEPAGE=0 (NumPy's transparent-huge-page "
+                         "advice off): on the measuring VM the first touch of fresh huge pages cost ~3.3 s of "
+                         "system time per GB against 1.2-2.5 s for 4 kB pages (docs/scaling.md)")
     ap.add_argument("--time-budget", type=float, default=120.0,
                     help="wall-clock budget of each solve in seconds (default 120; a loaded machine may need more)")
     args = ap.parse_args(argv)
+    if args.baseline:
+        _baseline()
     if args.png:
         from der.plotting import require_matplotlib
         try:
@@ -407,8 +435,9 @@ def main(argv=None):
             out = subprocess.run([sys.executable, __file__, "--single", problem, str(n), "--time-budget",
                                   str(args.time_budget)]
                                  + (["--second-order-correction"] if args.second_order_correction else [])
-                                 + (["--edge-newton"] if args.edge_newton else []),
-                                 capture_output=True, text=True)
+                                 + (["--edge-newton"] if args.edge_newton else [])
+                                 + (["--baseline"] if args.baseline else []),
+                                 capture_output=True, text=True, env=_child_env(args))
             try:
                 r = json.loads(out.stdout.strip().splitlines()[-1])
             except (ValueError, IndexError):
@@ -477,7 +506,8 @@ def setup_table(args):
 def million(args):
     """The 10^6-edge helix (stretched and overwound between clamps) in a fresh process."""
     out = subprocess.run([sys.executable, __file__, "--single", "helix_winding", "1000000", "--no-trace",
-                          "--time-budget", str(args.time_budget)], capture_output=True, text=True)
+                          "--time-budget", str(args.time_budget)] + (["--baseline"] if args.baseline else []),
+                         capture_output=True, text=True, env=_child_env(args))
     try:
         r = json.loads(out.stdout.strip().splitlines()[-1])
     except (ValueError, IndexError):

@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from ..geometry import add_compensated
-from ..linalg import add_diagonal, band_resolve, band_solve, band_to_coo, dot, dot_difference
+from ..linalg import add_diagonal, band_diagonal_abs, band_resolve, band_solve, band_to_coo, dot, dot_difference
 from .system import (
     FLOOR_FACTOR, INTERRUPTS, condense_forces, constrain_system, constraint_residual, energy_terms, evaluate_forces,
     evaluate_system, expand, final_result, floor_forces, floor_verdict, is_interrupt, load_scales, max_strain,
@@ -104,10 +104,11 @@ def solve_implicit(system, state, options, progress=None, recorder=None):
     (Newton steps from far away can land where round-off hides every descent direction of the soft modes)
     the solve restarts once from the initial state with the cautious pseudo-time start, within what is left
     of the iteration and time budgets."""
-    start = state.copy()
+    # the start is kept only for the edge-coordinate fallback below (a state is 136 MB at 10^6 edges, issue 17)
+    start = state.copy() if getattr(options, "edge_newton", False) else None
     t_start = time.perf_counter()
     result = _solve(system, state, options, progress, recorder, 0, t_start)
-    if getattr(options, "edge_newton", False) and result.status == "stalled" and result.linear_solves_edge:
+    if start is not None and result.status == "stalled" and result.linear_solves_edge:
         # edge coordinates stalled (their pseudo-time damping diag |K_e| differs from the node coordinates'; a
         # stiff inextensibility penalty far from equilibrium can leave them without progress): the node-coordinate
         # solve from the start, within what is left of the budgets
@@ -300,7 +301,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 if ab_K is None:
                     ab_K, work = np.empty_like(system.ab), np.empty_like(system.ab)
                 ab_K[:] = system.ab
-            diag = np.abs(np.take(system.ab[kl + ku, :], perm, out=diag_work), out=diag_work)
+            diag = band_diagonal_abs(system.ab, kl, ku, perm, diag_work)
             coo = system.contact_coo            # off-band contact Hessian triplets (empty: banded path)
             if coo:
                 cd = _coo_diagonal(coo, diag.size)

@@ -148,10 +148,10 @@ def scatter(ab, kl, ku, perm, rows, cols, vals, newpos, kl2, ku2, out):
         out[off2 + i - j, j] += vals[k]
 
 
-def banded_solve(ab, kl, ku, perm, rows, cols, vals, rhs, newpos, kl2, ku2, chol=None):
+def banded_solve(ab, kl, ku, perm, rows, cols, vals, rhs, newpos, kl2, ku2, chol=None, keep=None):
     """Solve (band + triplets) x = rhs in the reordered band: with ``chol`` (a BandCholesky) and a symmetric
     pattern (kl2 = ku2) first by the banded Cholesky (``cholesky_solve``), else, or if that is refused, by LAPACK's
-    dgbsv. Returns (x, info)."""
+    dgbsv. Returns (x, info). With ``keep`` (a dict) the factors are left there for ``banded_resolve``."""
     from scipy.linalg.lapack import dgbsv
 
     from ..linalg import LDLT_BACKWARD_ERROR
@@ -164,6 +164,8 @@ def banded_solve(ab, kl, ku, perm, rows, cols, vals, rhs, newpos, kl2, ku2, chol
             x = cholesky_solve(ab, kl, ku, perm, rows, cols, vals, rhs, newpos, kl2, chol, LDLT_BACKWARD_ERROR)
             if x is not None:
                 chol.counts["cholesky"] += 1
+                if keep is not None:
+                    keep.update(kind="cholesky", factors=chol.factors, newpos=newpos)
                 return x, 0
             chol.counts["cholesky_refused"] += 1
             chol.skip = CHOLESKY_RETRY_AFTER
@@ -172,8 +174,29 @@ def banded_solve(ab, kl, ku, perm, rows, cols, vals, rhs, newpos, kl2, ku2, chol
     scatter(ab, kl, ku, perm, rows, cols, vals, newpos, kl2, ku2, out)
     b = np.empty(n)
     b[newpos] = rhs
-    _, _, x, info = dgbsv(kl2, ku2, out, b, overwrite_ab=True, overwrite_b=True)
+    lu, piv, x, info = dgbsv(kl2, ku2, out, b, overwrite_ab=True, overwrite_b=True)
+    if keep is not None and info == 0:
+        keep.update(kind="lu", factors=(lu, piv, kl2, ku2), newpos=newpos)
     return x[newpos], int(info)
+
+
+def banded_resolve(keep, rhs):
+    """x = A^-1 rhs with the factors a ``banded_solve(..., keep=keep)`` left (no new factorisation, no refinement:
+    for a correction of the step that solve gave); None if there are none."""
+    from scipy.linalg.lapack import dgbtrs, dpbtrs
+
+    kind = keep.get("kind")
+    if kind is None:
+        return None
+    newpos = keep["newpos"]
+    b = np.empty(rhs.shape[0])
+    b[newpos] = rhs
+    if kind == "cholesky":
+        y, info = dpbtrs(keep["factors"], b, lower=1)
+    else:
+        lu, piv, kl2, ku2 = keep["factors"]
+        y, info = dgbtrs(lu, kl2, ku2, b, piv)
+    return y[newpos] if info == 0 else None
 
 
 # the symmetric path (banded_solve with a BandCholesky): LAPACK's banded Cholesky (dpbtrf, a quarter of the flops
@@ -192,6 +215,7 @@ class BandCholesky:
 
     def __init__(self):
         self.low = None
+        self.factors = None
         self.skip = 0
         self.counts = {"cholesky": 0, "dgbsv": 0, "cholesky_refused": 0}
 
@@ -267,6 +291,7 @@ def cholesky_solve(ab, kl, ku, perm, rows, cols, vals, rhs, newpos, kd, chol, to
     c, info = dpbtrf(low, lower=1, overwrite_ab=1)
     if info != 0:
         return None
+    chol.factors = c
     x = np.zeros(n)
     r = np.array(rhs, dtype=float)
     b = np.empty(n)

@@ -33,8 +33,13 @@ from .system import (
 )
 
 STALL_ITERATIONS = 6
-# contact: below this residual, after a full Newton step, the barrier Hessian is used unprojected
-EXACT_CONTACT_BELOW = 1e-4
+# contact: below this residual, after a full Newton step, the barrier Hessian is used unprojected (the projected one
+# as the fallback where the exact step fails: an indefinite matrix, no descent). Infinity: exact from the start,
+# as the smooth barrier always had. Measured on the plectoneme (docs/contact.md section 9.5): the projection hides
+# the sliding mode's small or negative curvature, and Newton with it converges linearly (a factor ~0.97-0.998 per
+# step at residuals 1e-3 .. 1e-4: 200-1,600 iterations per quarter turn); at 1e-4 (= the default tol) the exact
+# Hessian was never reached
+EXACT_CONTACT_BELOW = np.inf
 # contact: the Newton matrix reordered by reverse Cuthill-McKee and factorised as a band (der/contact/reorder.py)
 # while its bandwidth kl + ku stays at most this (measured: LAPACK's banded LU beats splu up to about 2 x 60)
 BANDED_CONTACT = True
@@ -49,6 +54,11 @@ MAX_SHRINKS = 40
 # the band path factorises the Jacobian in place (False: copy it before each attempt, as the contact path does;
 # kept for the test that both end bitwise the same)
 IN_PLACE = True
+# contact: a refused Newton step is corrected for its chord error (second_order_correction below, solved with the
+# contact solve's factors) and searched along the arc q + a delta + a^2 c, each trial's arc proven free of passage
+# by the terms' ``arc_step_safe`` (the straight step otherwise), whatever SolverOptions.second_order_correction
+# says (that option is the no-contact path's, off by default). Measured on the plectoneme: docs/contact.md 9.5
+CONTACT_SECOND_ORDER = True
 
 
 def second_order_correction(system, state, delta, resolve):
@@ -171,9 +181,14 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     # work arrays reused by every iteration (issue 17: at 10^6 edges fresh n-sized arrays were page-faulted on
     # each use): the residual, the damping diagonal, the round-off forces (their rounding scale formed in place)
     R_work, diag_work, round_off_work = (np.empty(n_dof) for _ in range(3))
-    # the second-order correction of a refused full step (SolverOptions.second_order_correction): band path only
+    # the second-order correction of a refused full step (SolverOptions.second_order_correction): band path only;
+    # with contact terms CONTACT_SECOND_ORDER decides, on the contact solve's factors
     soc = (options.second_order_correction and not system.terms and system.parts is None
            and bool(system.plan.has_stretch))
+    # contact: every term must prove the curved path free of passage (der/terms/contact.py arc_step_safe)
+    arc_terms = bool(system.terms) and all([getattr(t, "arc_ok", False) for t in system.terms])
+    if system.terms:
+        soc = CONTACT_SECOND_ORDER and arc_terms and system.parts is None and bool(system.plan.has_stretch)
     # contact: exact (unprojected) barrier Hessian in Newton's end game: below a residual the terms set (a smooth
     # barrier, der/contact/sampled.py, sets infinity: exact from the start, the projected one only as a fallback)
     exact_below = max([getattr(t, "exact_hessian_below", EXACT_CONTACT_BELOW) for t in system.terms],
@@ -345,13 +360,16 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                     add_diagonal(work, kl, ku, perm, diag, 1.0 / dt)
                     constrain_system(system, work, 1.0)     # T^T (K + D/dt) T: the end supports' free variables
                     if coo:
-                        delta, info = _contact_solve(system, work, coo, R)
+                        factors = {}       # the solve's factors, for the second-order correction
+                        delta, info = _contact_solve(system, work, coo, R, factors)
                     else:
                         delta, info = band_solve(work, kl, ku, perm, R, ldlt=getattr(system, "ldlt", None))
                         system.linear_solves["band"] += 1
                     expand(system, delta)
                     step_lo = None
                     resolve = (lambda rhs: _band_resolve_q(system, rhs)) if in_place and not coo else None
+                    if coo:
+                        resolve = lambda rhs, f=factors: _contact_resolve_q(system, f, rhs)    # noqa: E731
                 timings["factorisation"] += time.perf_counter() - t_phase
                 with np.errstate(over="ignore", invalid="ignore"):   # a huge step is refused just below
                     slope = dot(R, delta)
@@ -375,6 +393,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 # to their own rounding); the node path's is delta alone
                 compensated = getattr(state, "q_lo", None) is not None and getattr(trial, "q_lo", None) is not None
                 ls = 0
+                arc_tried = False
                 while ls < options.line_search_steps:
                     if arc is None and step_lo is None:
                         if compensated:
@@ -402,6 +421,12 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                                 q_trial += (a * a) * arc
                             q_new = q_trial
                         work_done = a * dot(fext, delta) + (a * a * dot(fext, arc) if arc is not None else 0.0)
+                    if arc is not None and system.terms and not all(
+                            [t.arc_step_safe(state, delta, arc, a) for t in system.terms]):
+                        # this fraction's arc is not proven free of passage: the straight step from here on
+                        # (a <= the CCD-safe fraction a_start)
+                        arc = None
+                        continue
                     if transport(system, state, q_new, trial):
                         e_trial = evaluate_system(system, trial, 0)
                         merit = e_trial - energy - work_done
@@ -409,10 +434,11 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                         if np.isfinite(e_trial) and merit <= -options.armijo * a * slope + slack:
                             accepted = True
                             break
-                    if arc is None and ls == 0 and soc:
+                    if arc is None and ls == 0 and soc and not arc_tried:
                         # the full step was refused: correct it for the chord error of the edges it turns and
                         # try the full step again along the arc (one solve with the same factors)
                         arc = second_order_correction(system, state, delta, resolve)
+                        arc_tried = True
                         if arc is not None:
                             system.linear_solves["second_order"] = system.linear_solves.get("second_order", 0) + 1
                             continue
@@ -477,12 +503,26 @@ def _coo_diagonal(coo, n):
     return out
 
 
-def _contact_solve(system, work, coo, R):
+def _contact_resolve_q(system, factors, rhs):
+    """K^-1 rhs with the factors the last contact solve left in ``factors`` (``_contact_solve``): ``rhs``
+    generalized forces in q, condensed to the free variables; the step expanded to q. None without factors."""
+    condense_forces(system, rhs)
+    if factors.get("kind") == "splu":
+        c = factors["factors"].solve(rhs)
+    else:
+        from ..contact.reorder import banded_resolve
+
+        c = banded_resolve(factors, rhs)
+    return None if c is None else expand(system, c)
+
+
+def _contact_solve(system, work, coo, R, factors=None):
     """Solve (K + D/dt + H_contact) delta = R: the constrained band (fixed DOFs already identity rows and
     columns, the pseudo-time diagonal included) plus the contact triplets off the fixed DOFs. The DOF blocks are
     reordered by reverse Cuthill-McKee and the matrix factorised as a band by LAPACK (der/contact/reorder.py) while
     the reordered bandwidth is at most BANDED_CONTACT_MAX_WIDTH; otherwise as one CSC matrix by scipy's splu
-    (SuperLU, COLAMD ordering). Returns (delta, info) like band_solve."""
+    (SuperLU, COLAMD ordering). Returns (delta, info) like band_solve; with ``factors`` (a dict) the factorisation
+    is left there for ``_contact_resolve_q``."""
     import scipy.sparse as sp
     from scipy.sparse.linalg import splu
 
@@ -517,7 +557,8 @@ def _contact_solve(system, work, coo, R):
                 chol = getattr(system, "contact_cholesky", None)
                 if chol is None:
                     chol = system.contact_cholesky = BandCholesky()
-            return banded_solve(work, system.kl, system.ku, system.perm, rows, cols, vals, R, newpos, kl2, ku2, chol)
+            return banded_solve(work, system.kl, system.ku, system.perm, rows, cols, vals, R, newpos, kl2, ku2, chol,
+                                factors)
     rb, cb, vb = band_to_coo(work, system.kl, system.ku, system.perm)
     rows, cols, vals = np.concatenate([rb, rows]), np.concatenate([cb, cols]), np.concatenate([vb, vals])
     A = sp.csc_matrix((vals, (rows, cols)), shape=(n, n))
@@ -526,4 +567,6 @@ def _contact_solve(system, work, coo, R):
         lu = splu(A, permc_spec="COLAMD")
     except RuntimeError:          # exactly singular
         return np.zeros(n), 1
+    if factors is not None:
+        factors.update(kind="splu", factors=lu)
     return lu.solve(R), 0

@@ -40,7 +40,9 @@ class SolverOptions:
         refuses a full step, correct it for the elongation that the straight-line step adds to the edges it
         turns beyond its linearisation (the chord error |d_perp|^2 / 2h, priced by the axial stiffness: the
         Maratos effect that stalls Newton's method on a fine inextensible ring), solved with the same
-        factorisation, and search along the arc q + a delta + a^2 c. Off by default (docs/scaling.md).
+        factorisation, and search along the arc q + a delta + a^2 c. Off by default (docs/scaling.md). Scenes with
+        self-contact (segment barrier) always correct a refused step this way, with the contact solve's factors and
+        each arc proven free of passage (der/solvers/implicit.py CONTACT_SECOND_ORDER; docs/contact.md 9.5).
     dt : explicit time step (physical time for the rod's line density rho_A); None picks ``safety / omega_max``,
         half the stability limit 2 / omega_max. A dt above the stability limit is refused with a ValueError.
     safety : fraction of the stable explicit step used.

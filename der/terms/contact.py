@@ -448,6 +448,36 @@ class BoundSelfContact(BoundBarrier):
             self.step_candidates(pos, tau * dpos, ccd=False)
         return float(tau)
 
+    @property
+    def arc_ok(self):
+        """``arc_step_safe`` proves no passage along a curved step (the segment barrier; the sampled one's own
+        sample CCD has no such bound here)."""
+        return self.samples is None
+
+    def arc_step_safe(self, state, delta, arc, a):
+        """True if no strand passes through another anywhere on the curved path q + t a delta + t^2 a^2 arc, t in
+        [0, 1] (the second-order-corrected line search of der/solvers/implicit.py). The path leaves its chord
+        q -> q + a delta + a^2 arc by at most dev = a^2 max_i |arc_i| / 4 at any node (the parabola's deviation
+        t (1 - t) a^2 arc_i), so every point of an edge by at most dev and every edge-edge distance by at most
+        2 dev: the CCD on the chord with each radius widened by dev (offset 2r + 2 dev) keeps the path's gaps
+        above its own 10 % of the widened gap, hence > 0 (no passage, finite barrier). Pairs are those the chord
+        can bring within dhat; dev is held below dhat / 4, so a pair left out keeps a gap > dhat / 2 on the
+        path. False if any of that fails (the caller then searches along the straight step)."""
+        if not self.arc_ok:
+            return False
+        pos = self.positions(state)
+        dd = delta.reshape(-1, 4)[:self.n_nodes, :3]
+        cc = arc.reshape(-1, 4)[:self.n_nodes, :3]
+        chord = np.ascontiguousarray(a * dd + (a * a) * cc)
+        dev = 0.25 * a * a * float(np.sqrt((cc * cc).sum(axis=1)).max()) * (1.0 + 1e-9) \
+            + 1e-13 * (1.0 + float(np.abs(pos).max()))
+        if not (np.isfinite(dev) and np.isfinite(chord).all()) or dev > 0.25 * self.dhat:
+            return False
+        pairs = self.candidates(pos, pos + chord)
+        tau, _, _ = self.C.pairs_ccd(pos, chord, self.topo.edges, pairs, self.topo.edge_radius + dev, MIN_GAP_FRACTION,
+                                     1e-6, 10000)
+        return tau >= 1.0
+
     def _min_curvature_radius(self, state):
         """The tightest bend over the rods this term sees (one rod, or those of der.rod_contact)."""
         rods = getattr(self, "rods", None)

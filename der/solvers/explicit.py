@@ -40,6 +40,8 @@ from .system import (
 )
 
 STATUS_RUNNING, STATUS_CONVERGED, STATUS_NONFINITE = 0, 1, 2
+CAP_CUT = 0.9          # a step rejected near the cap dt_max lowers the cap by this factor (the kernels)
+CAP_RECOVERY_STEPS = 2000   # steps without a rejection after which one such cut is undone (solve_explicit)
 STALL_STEPS = 20_000   # no halving of the residual in this many steps (or a quarter of the run): stalled
 NOISE_FACTOR = 3.0     # at the floor, a negative power below this many standard deviations of its noise is ignored
 
@@ -90,8 +92,9 @@ def _fire_run(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, inv_scale
               alpha, n_pos, n_min, f_inc, f_dec, alpha0, f_alpha, kl, ku, perm, e_total, work_done, guard,
               project, w, closed, target, max_strain, noise, link_dep, link_const, tri_dep, tri_master, tri_coef):
     """Run up to n_steps FIRE steps in place. Returns (status, steps, residual, dt, alpha, n_pos, e_total,
-    work_done, rejected, dt_max): a step rejected near the cap also lowers the cap by 10 %, so that the integrator
-    settles below the step at which its energy error shows (fewer restarts: FIRE keeps its momentum).
+    work_done, rejected, dt_max): a step rejected near the cap also lowers the cap by CAP_CUT (10 %), so that the
+    integrator settles below the step at which its energy error shows (fewer restarts: FIRE keeps its momentum);
+    ``solve_explicit`` undoes one such cut after CAP_RECOVERY_STEPS steps without a rejection.
 
     With ``project`` (an inextensible rod; ``plan`` then has no stretch term) the edge lengths are constraints:
     the force is split into its part along the constraint manifold (the rest is balanced by the tension, written
@@ -212,7 +215,7 @@ def _fire_run(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, inv_scale
             # reject: back to the old state, at rest, smaller step
             rejected += 1
             if dt > 0.5 * dt_max:     # failing near the cap: the cap is too high for this trajectory
-                dt_max *= 0.9
+                dt_max *= CAP_CUT
             q[:] = q_old
             q_lo[:] = lo_old
             d1[:, :] = d1_old
@@ -308,6 +311,8 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
     # (times ``safety``): from rest, a symplectic Euler step then lowers the energy in every mode (dt omega < 1),
     # so a restart after a rejected step always makes progress
     dt_max = options.dt if options.dt is not None else options.safety * 0.5 * dt_stable
+    dt_cap = dt_max       # the ceiling of dt_max: the user's dt, or the current stable-step bound times safety / 2
+    clean = 0             # steps since the kernel last cut dt_max (a step rejected near it)
     dt = 0.1 * dt_max
     alpha, n_pos = options.fire_alpha, 0
     v = np.zeros(rod.n_dof)
@@ -361,6 +366,14 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
                 step_cost = cost if step_cost is None else max(cost, 0.5 * step_cost)
             steps += done
             rejected_total += rejected
+            # a rejected step near the cap cuts dt_max by CAP_CUT (the kernel); without a way back those cuts
+            # compound over a long solve (greenhill's snap into a loop: 19 of them took dt_max from 2.0e-5 to
+            # 3.7e-6 and the solve 5 times slower, its residual stalled at 1.2e-5 after 129k steps): after
+            # CAP_RECOVERY_STEPS steps without a rejection one cut is undone, up to the stable ceiling
+            clean = 0 if rejected else clean + done
+            if clean >= CAP_RECOVERY_STEPS and dt_max < dt_cap:
+                dt_max = min(dt_cap, dt_max / CAP_CUT)
+                clean = 0
             if code == STATUS_NONFINITE:
                 state.copy_from(last_good)
                 status, message = "nonfinite", f"non-finite force at step {steps}; last finite state kept"
@@ -446,7 +459,8 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
             if passes % 10 == 0 and options.dt is None:
                 # the stiffness changes as the rod deforms: keep the step below the stable limit
                 dt_stable, bounds = stable_time_step(system, state)
-                dt_max = min(dt_max, options.safety * 0.5 * dt_stable)
+                dt_cap = options.safety * 0.5 * dt_stable
+                dt_max = min(dt_max, dt_cap)
                 dt = min(dt, dt_max)
     except INTERRUPTS as exc:
         if not is_interrupt(exc):

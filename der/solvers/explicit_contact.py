@@ -30,7 +30,7 @@ from ..contact.ccd import pairs_ccd
 from ..geometry import add_compensated_one, edge_array, transport_frames
 from ..linalg import condense_vector
 from ..scene import evaluate
-from .explicit import NOISE_FACTOR, STATUS_CONVERGED, STATUS_NONFINITE, STATUS_RUNNING, _follow_links
+from .explicit import CAP_CUT, NOISE_FACTOR, STATUS_CONVERGED, STATUS_NONFINITE, STATUS_RUNNING, _follow_links
 from .projection import project_force, project_positions, project_velocity, tension_energy
 
 STATUS_REBUILD = 3
@@ -230,7 +230,7 @@ def fire_run_contact(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, in
         if not ok or not (new_total <= e_total + slack):
             rejected += 1
             if dt > 0.5 * dt_max:
-                dt_max *= 0.9
+                dt_max *= CAP_CUT
             q[:] = q_old
             q_lo[:] = lo_old
             d1[:, :] = d1_old

@@ -260,7 +260,7 @@ class BandLDLT:
         self.backward_error = np.inf
         self.skip = 0           # band solves left to send straight to dgbsv after a refusal (LDLT_RETRY_AFTER)
         self.refusals = 0       # LDL^T attempts refused since the last accepted one
-        # which factors the last band_solve left for band_resolve: "ldlt" (L, D; the band untouched), "dgbsv"
+        # which factors the last band_solve left for band_resolve: "ldlt" (L, D; the band's entries untouched, its kl spare rows holding L with LDLT_IN_BAND), "dgbsv"
         # (the LU factors in the band itself, their pivots in ``piv``) or None
         self.factors = None
         self.piv = None
@@ -298,8 +298,8 @@ def band_ldlt_compact(ab, kl, ku, L, D):
     """LDL^T factorisation without pivoting of the symmetric matrix M whose lower triangle is that of the band
     matrix A in ``ab`` (LAPACK general-band storage, ``kl`` = ``ku`` = b; not modified: M = A for a symmetric A,
     otherwise the solves refine against A), into ``L`` (n, b) -- ``L[j, s - 1]`` = l_{j+s, j}, each column of
-    the factor contiguous: the triangular solves then stream it (measured 5-8x faster than reading a factor kept
-    in the spare rows of the general-band storage, one column every 2 kl + ku + 1 doubles) -- and the pivots
+    the factor contiguous: the triangular solves then stream it; a factor kept in the band's spare rows, one column
+    every 2 kl + ku + 1 doubles, makes a refined solve ~1.3x slower (LDLT_IN_BAND) -- and the pivots
     ``D``. Right-looking by columns, the trailing b columns updated in ``L`` and ``D`` themselves (each enters
     from ``ab`` b steps before its turn): O(n b^2) flops, a quarter of banded LU with partial pivoting. Compiled
     with ``kl`` a constant for der's two bandwidths (10: an open rod, 19: a folded ring; its short loops unrolled,
@@ -481,7 +481,8 @@ def band_solve(ab, kl, ku, perm, rhs, overwrite=True, ldlt=None):
     by factors (with ``overwrite``; else a copy is factorised).
 
     A band with kl = ku is first factorised by LDL^T without pivoting of its symmetric part
-    (``band_ldlt_compact``: a quarter of the flops of banded LU; ``ab`` untouched), each solution refined against
+    (``band_ldlt_compact``: a quarter of the flops of banded LU; the entries of ``ab`` untouched, its kl spare rows
+    -- the rows dgbsv fills in, ignored on entry -- holding L with LDLT_IN_BAND), each solution refined against
     A and accepted only when its componentwise backward error is at most LDLT_BACKWARD_ERROR (what LU with partial
     pivoting achieves); otherwise -- a zero pivot, an indefinite matrix whose pivots grow, a skew part too large
     -- the same ``ab`` goes to LAPACK's ``dgbsv``. ``ldlt``: a ``BandLDLT`` whose work arrays are reused (and
@@ -552,7 +553,7 @@ def band_solve(ab, kl, ku, perm, rhs, overwrite=True, ldlt=None):
 
 def band_resolve(ab, kl, ku, perm, rhs, ldlt):
     """x with A x = rhs for the matrix the last ``band_solve(ab, ..., ldlt=ldlt)`` factorised, reusing its factors
-    (no new factorisation, O(n b)): the LDL^T factors refined against the band (untouched on that path), or
+    (no new factorisation, O(n b)): the LDL^T factors refined against the band (its entries untouched on that path), or
     dgbsv's LU factors and pivots (``dgbtrs``). ``rhs`` (n,) in DOF order. None if that solve left no factors
     (it failed, or ``ab`` was factorised since)."""
     from scipy.linalg.lapack import dgbtrs

@@ -96,15 +96,17 @@ def test_arc_step_safe_refuses_a_curved_path_through_another_strand_and_holds_on
         return min(float(term._pair_data(x, every)[0].min())
                    for x in _arc_points(pos, dpos, cpos, a, np.linspace(0.0, 1.0, 41)))
 
-    # the adversarial arc: chord zero, its middle (t = 1/2: a deviation -c/4) 1.5 gaps into the other strand
+    # the adversarial arc: chord zero, its middle (t = 1/2: a deviation -c/4) 1.2 gaps into the other strand, a
+    # deviation below the dhat / 4 guard, so only the CCD with widened radii can refuse it
     cpos = np.zeros_like(pos)
     for node in topo.edges[ea]:
-        cpos[node] = -4.0 * 1.5 * gap0 * towards
+        cpos[node] = -4.0 * 1.2 * gap0 * towards
     dpos = -cpos
+    assert 1.2 * gap0 < 0.25 * term.dhat               # not refused by the deviation guard
     assert min_gap_on(dpos, cpos, 1.0) < 0.0            # the path passes through
     assert term.max_step(state, step(dpos + cpos)) == 1.0     # its chord (no motion at all) is safe
     assert not term.arc_step_safe(state, step(dpos), step(cpos), 1.0)
-    # a fifth of it pointed away from the other strand (deviation 0.3 gap: the bound's widened gap stays > 0):
+    # a fifth of it pointed away from the other strand (deviation 0.24 gap: the bound's widened gap stays > 0):
     # proven free
     assert min_gap_on(-0.2 * dpos, -0.2 * cpos, 1.0) > 0.0
     assert term.arc_step_safe(state, step(-0.2 * dpos), step(-0.2 * cpos), 1.0)

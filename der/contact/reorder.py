@@ -182,7 +182,9 @@ def banded_solve(ab, kl, ku, perm, rows, cols, vals, rhs, newpos, kl2, ku2, chol
 
 def banded_resolve(keep, rhs):
     """x = A^-1 rhs with the factors a ``banded_solve(..., keep=keep)`` left (no new factorisation, no refinement:
-    for a correction of the step that solve gave); None if there are none."""
+    for a correction of the step that solve gave); None if there are none. On the Cholesky path the factor is that
+    of A's lower triangle taken as symmetric, so x solves A up to its skew part (the frame transport's): an
+    approximate correction, which the line search's energy test and passage check judge like any other."""
     from scipy.linalg.lapack import dgbtrs, dpbtrs
 
     kind = keep.get("kind")

@@ -424,8 +424,12 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                     if arc is not None and system.terms and not all(
                             [t.arc_step_safe(state, delta, arc, a) for t in system.terms]):
                         # this fraction's arc is not proven free of passage: the straight step from here on
-                        # (a <= the CCD-safe fraction a_start)
+                        # (a <= the CCD-safe fraction a_start); at ls = 0 the straight step at this a was refused
+                        # already, so halve rather than evaluate it again
                         arc = None
+                        if ls == 0:
+                            a *= 0.5
+                            ls += 1
                         continue
                     if transport(system, state, q_new, trial):
                         e_trial = evaluate_system(system, trial, 0)

@@ -566,7 +566,10 @@ def newton_steps(system, state, rhs):
             return None
         delta = np.column_stack([x for x, _ in cols])
     else:
-        delta, info = band_solve(ab, system.kl, system.ku, system.perm, rhs, ldlt=getattr(system, "ldlt", None))
+        ldlt = getattr(system, "ldlt", None)
+        delta, info = band_solve(ab, system.kl, system.ku, system.perm, rhs, ldlt=ldlt)
+        if ldlt is not None:
+            ldlt.release()      # its L may be a view of this copy's spare rows: do not keep the whole copy alive
         if info != 0:
             return None
     if not np.all(np.isfinite(delta)):

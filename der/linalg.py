@@ -260,8 +260,9 @@ class BandLDLT:
         self.backward_error = np.inf
         self.skip = 0           # band solves left to send straight to dgbsv after a refusal (LDLT_RETRY_AFTER)
         self.refusals = 0       # LDL^T attempts refused since the last accepted one
-        # which factors the last band_solve left for band_resolve: "ldlt" (L, D; the band's entries untouched, its kl spare rows holding L with LDLT_IN_BAND), "dgbsv"
-        # (the LU factors in the band itself, their pivots in ``piv``) or None
+        # which factors the last band_solve left for band_resolve: "ldlt" (L, D; the band's entries untouched, its
+        # kl spare rows holding L with LDLT_IN_BAND), "dgbsv" (the LU factors in the band itself, their pivots in
+        # ``piv``) or None
         self.factors = None
         self.piv = None
 

@@ -181,14 +181,14 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     # work arrays reused by every iteration (issue 17: at 10^6 edges fresh n-sized arrays were page-faulted on
     # each use): the residual, the damping diagonal, the round-off forces (their rounding scale formed in place)
     R_work, diag_work, round_off_work = (np.empty(n_dof) for _ in range(3))
-    # the second-order correction of a refused full step (SolverOptions.second_order_correction): band path only;
-    # with contact terms CONTACT_SECOND_ORDER decides, on the contact solve's factors
-    soc = (options.second_order_correction and not system.terms and system.parts is None
-           and bool(system.plan.has_stretch))
-    # contact: every term must prove the curved path free of passage (der/terms/contact.py arc_step_safe)
-    arc_terms = bool(system.terms) and all([getattr(t, "arc_ok", False) for t in system.terms])
+    # the second-order correction of a refused full step: without contact SolverOptions.second_order_correction
+    # decides (band path); with contact terms CONTACT_SECOND_ORDER, on the contact solve's factors, when every term
+    # can prove the curved path free of passage (der/terms/contact.py arc_step_safe)
     if system.terms:
-        soc = CONTACT_SECOND_ORDER and arc_terms and system.parts is None and bool(system.plan.has_stretch)
+        soc = CONTACT_SECOND_ORDER and all([getattr(t, "arc_ok", False) for t in system.terms])
+    else:
+        soc = options.second_order_correction
+    soc = bool(soc) and system.parts is None and bool(system.plan.has_stretch)
     # contact: exact (unprojected) barrier Hessian in Newton's end game: below a residual the terms set (a smooth
     # barrier, der/contact/sampled.py, sets infinity: exact from the start, the projected one only as a fallback)
     exact_below = max([getattr(t, "exact_hessian_below", EXACT_CONTACT_BELOW) for t in system.terms],

@@ -15,21 +15,26 @@ import sys
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 
-def main(argv=None):
-    argv = sys.argv[1:] if argv is None else argv
-    rest = argv.index("--") if "--" in argv else len(argv)
-    own, scenario_args = argv[:rest], argv[rest + 1:]
+def apply_switches(items):
+    """Set each NAME=VALUE of ``items`` on der/solvers/implicit.py or der/contact/reorder.py (VALUE in the
+    constant's own type; 0/1 for a switch)."""
     import der.contact.reorder as reorder
     import der.solvers.implicit as implicit
 
-    sets = [own[i + 1] for i, a in enumerate(own) if a == "--set"]
-    for item in sets:
+    for item in items:
         name, _, value = item.partition("=")
         module = implicit if hasattr(implicit, name) else reorder if hasattr(reorder, name) else None
         if module is None:
             raise SystemExit(f"no switch {name} in der/solvers/implicit.py or der/contact/reorder.py")
         old = getattr(module, name)
         setattr(module, name, bool(int(value)) if isinstance(old, bool) else type(old)(float(value)))
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    rest = argv.index("--") if "--" in argv else len(argv)
+    own, scenario_args = argv[:rest], argv[rest + 1:]
+    apply_switches([own[i + 1] for i, a in enumerate(own) if a == "--set"])
     sys.argv = ["plectoneme.py"] + scenario_args
     runpy.run_path(os.path.join(HERE, "..", "scenarios", "plectoneme.py"), run_name="__main__")
 

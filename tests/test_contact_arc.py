@@ -170,3 +170,44 @@ def test_plectonemic_step_takes_fewer_newton_iterations_with_the_exact_hessian_a
     assert new.iterations < 0.5 * old.iterations, (new.iterations, old.iterations)
     terms = new.contact.get("terms", [new.contact])
     assert min(t["min_distance"] for t in terms) >= 2 * p.radius
+
+
+def test_plectonemic_steps_take_the_arc_at_every_fraction_where_it_is_proven_safe(monkeypatch):
+    """The line search tries the second-order-corrected arc at every fraction a where ``arc_step_safe`` proves it
+    free of passage (its deviation from the chord falls as a^2), the straight step only where the proof fails;
+    before, the first fraction whose arc was not proven safe sent the rest of the search along the straight step.
+    On seven plectonemic quarter turns (L = 10, n = 100, 2.5 -> 4.25 turns, each from the continuation's own
+    state) that takes fewer Newton iterations in all (measured 210 against 254; docs/contact.md section 9.6),
+    every solve converges and the strands stay >= 2r apart."""
+    import der.solvers.implicit as implicit
+
+    P = _plectoneme_module()
+    p = argparse.Namespace(A1=1.0, A2=1 / 0.67, L=10.0, EA=1e5, radius=0.05, force=1.0, turns=4.5, sweep=18,
+                           perturb=1e-3, png=None, n=100, samples=None, predictor="last")
+    solves = []
+
+    class Saver:
+        args = argparse.Namespace(tol=1e-4)
+
+        def solve(self, scene, **kw):
+            kw.setdefault("tol", 1e-4)
+            r = der.solve(scene, **kw)
+            solves.append((scene, r.state))
+            return r
+
+    P.run(p, Saver())
+
+    def steps():
+        # the quarter turns 2.5 -> 2.75, ..., 4.0 -> 4.25 (solves[k]: k quarter turns)
+        return [der.solve(solves[k][0], state=solves[k - 1][1], stability=False, max_iterations=3000, tol=1e-4,
+                          raise_on_failure=False) for k in range(11, 18)]
+
+    new = steps()
+    monkeypatch.setattr(implicit, "CONTACT_ARC_EVERY_FRACTION", False)
+    old = steps()
+    assert all(r.status == "converged" for r in new + old)
+    n_new, n_old = sum(r.iterations for r in new), sum(r.iterations for r in old)
+    assert n_new < 0.9 * n_old, ([r.iterations for r in new], [r.iterations for r in old])
+    for r in new:
+        terms = r.contact.get("terms", [r.contact])
+        assert min(t["min_distance"] for t in terms) >= 2 * p.radius

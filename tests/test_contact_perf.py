@@ -273,3 +273,27 @@ def test_plectoneme_side_by_side_end_quantities_of_a_twisted_straight_rod():
     # midpoints, are L apart)
     assert abs(q["writhe"]) < 1e-9 and q["extension"] == pytest.approx(b.L * b.N_ELEM / (b.N_ELEM - 1), rel=1e-9)
     assert q["min_distance"] > 2 * b.R
+
+
+def test_symmetric_part_of_a_band_in_place():
+    """``reorder.symmetric_part`` (the CONTACT_SYMMETRIC measurement, docs/contact.md section 9.6) replaces a general
+    band by (A + A^T) / 2 and returns max |A - A^T| / 2."""
+    from der.contact.reorder import symmetric_part
+    from der.linalg import band_to_coo
+
+    rng = np.random.default_rng(3)
+    n, kl = 23, 4
+    ab = np.zeros((3 * kl + 1, n), order="F")
+    for j in range(n):
+        for i in range(max(0, j - kl), min(n - 1, j + kl) + 1):
+            ab[2 * kl + i - j, j] = rng.normal()
+    perm = np.arange(n, dtype=np.int64)
+    r, c, v = band_to_coo(ab, kl, kl, perm)
+    A = np.zeros((n, n))
+    A[r, c] = v
+    skew = symmetric_part(ab, kl, kl)
+    r, c, v = band_to_coo(ab, kl, kl, perm)
+    S = np.zeros((n, n))
+    S[r, c] = v
+    assert np.allclose(S, 0.5 * (A + A.T), rtol=0, atol=1e-15)
+    assert skew == pytest.approx(0.5 * np.abs(A - A.T).max(), rel=1e-14)

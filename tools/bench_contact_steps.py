@@ -1,7 +1,7 @@
 """Before/after of contact solves on the same plectoneme continuation steps (docs/contact.md section 8.3).
 
     python tools/bench_contact_steps.py --save DIR [--turns 5 --sweep 20 --n 400]   # write the steps' states
-    python tools/bench_contact_steps.py --load DIR --steps 17 18 [--json]          # solve step k -> k + 1
+    python tools/bench_contact_steps.py --load DIR --steps 17 18 [--json] [--set NAME=VALUE]   # step k -> k + 1
 
 --save runs scenarios/plectoneme.py's continuation (tol 1e-4) and pickles (scene, state) after every step as
 DIR/state_<k>.pkl (k from 0). --load solves, for each k of --steps, the scene of step k + 1 from the state of step
@@ -75,7 +75,15 @@ def main(argv=None):
     ap.add_argument("--sweep", type=int, default=20)
     ap.add_argument("--n", type=int, default=400)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                    help="a solver switch for --load (tools/plectoneme_with_switches.py), e.g. "
+                         "CONTACT_ARC_EVERY_FRACTION=0")
     args = ap.parse_args(argv)
+    if args.set:
+        sys.path.insert(0, HERE)
+        from plectoneme_with_switches import apply_switches
+
+        apply_switches(args.set)
     if args.save:
         print(f"{save(args.save, args.turns, args.sweep, args.n)} states written to {args.save}")
     if args.load:

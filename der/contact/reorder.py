@@ -129,6 +129,24 @@ def bandwidths(kl, ku, perm, rows, cols, newpos):
 
 
 @njit(cache=True)
+def symmetric_part(ab, kl, ku):
+    """The band ``ab`` (LAPACK general-band layout, kl = ku) replaced in place by its symmetric part (A + A^T) / 2;
+    returns max |A - A^T| / 2 over the band (the skew part dropped)."""
+    n = ab.shape[1]
+    off = kl + ku
+    skew = 0.0
+    for j in range(n):
+        for i in range(j + 1, min(n - 1, j + kl) + 1):
+            a = ab[off + i - j, j]
+            b = ab[off + j - i, i]
+            m = 0.5 * (a + b)
+            skew = max(skew, abs(a - m))
+            ab[off + i - j, j] = m
+            ab[off + j - i, i] = m
+    return skew
+
+
+@njit(cache=True)
 def scatter(ab, kl, ku, perm, rows, cols, vals, newpos, kl2, ku2, out):
     """out (2 kl2 + ku2 + 1, n), LAPACK's dgbsv layout in the new order, = the band ``ab`` + the triplets."""
     n = perm.shape[0]

@@ -47,6 +47,12 @@ BANDED_CONTACT_MAX_WIDTH = 120
 # contact: the reordered band factorised by LAPACK's banded Cholesky (a quarter of dgbsv's flops; refined against
 # the whole matrix, dgbsv where that is refused: der/contact/reorder.py); False: dgbsv always, as before
 CONTACT_CHOLESKY = True
+# contact: True solves the Newton matrix with the elastic band's symmetric part (K + K^T) / 2, dropping its skew part,
+# the frame-transport term dE/dtheta_j / (2 |e_j|^2) [t_j]_x (geometry.add_transport_jacobian), so that the banded
+# Cholesky is not refused on it. Measured and not kept (docs/contact.md section 9.6): that term is ~1e-8 of max|A|
+# but not small against the plectoneme's soft modes (the smallest eigenvalue 2.9e-5, of max|A| 8e6), and without it
+# the snap took 722-824 Newton iterations instead of 410-453 and the 6-turn slope moved 3-5 %
+CONTACT_SYMMETRIC = False
 FLOOR_STALL_ITERATIONS = 2      # enough once the residual is down at the round-off floor
 # pseudo-time step reductions (x0.1 each) before a step is declared impossible: enough to go from Newton's
 # method (dt up to 1e30) down to a step that only damps (dt ~ 1e-10); 12 near the round-off floor
@@ -59,6 +65,13 @@ IN_PLACE = True
 # by the terms' ``arc_step_safe`` (the straight step otherwise), whatever SolverOptions.second_order_correction
 # says (that option is the no-contact path's, off by default). Measured on the plectoneme: docs/contact.md 9.5
 CONTACT_SECOND_ORDER = True
+# contact: that arc is tried at every fraction of the line search where it is proven free of passage (its deviation
+# from the chord falls as a^2), the straight step where not; False: the straight step from the first fraction whose
+# arc is not proven safe on (round 4's search). With CONTACT_ARC_FROM_CONTACT_START only in a solve that starts in
+# contact: the snap of a straight rod into a plectoneme keeps round 4's search -- with the arc it landed the
+# plectoneme lower on the rod, whose later steps then ran into the clamp (docs/contact.md section 9.6)
+CONTACT_ARC_EVERY_FRACTION = True
+CONTACT_ARC_FROM_CONTACT_START = True
 
 
 def second_order_correction(system, state, delta, resolve):
@@ -194,6 +207,9 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
     exact_below = max([getattr(t, "exact_hessian_below", EXACT_CONTACT_BELOW) for t in system.terms],
                       default=EXACT_CONTACT_BELOW)
     exact_contact = exact_below == np.inf
+    # the arc at every fraction (CONTACT_ARC_EVERY_FRACTION) in a solve that starts in contact; decided at its first
+    # iteration (None until then)
+    arc_every = None
     # band path: the forces first (order 1: the same pass and sums as the assembly, bitwise the same residual and
     # energy), the band only when it is used -- a step, the floor's bound or verdict. A converged check and an
     # inextensible rod's multiplier update then assemble nothing (issue 17). With contact terms as before.
@@ -318,6 +334,9 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 ab_K[:] = system.ab
             diag = band_diagonal_abs(system.ab, kl, ku, perm, diag_work)
             coo = system.contact_coo            # off-band contact Hessian triplets (empty: banded path)
+            if arc_every is None:
+                arc_every = CONTACT_ARC_EVERY_FRACTION and (
+                    not CONTACT_ARC_FROM_CONTACT_START or any([c[0].size > 0 for c in coo]))
             if coo:
                 cd = _coo_diagonal(coo, diag.size)
                 # (a smooth term's exact Hessian may have negative diagonal entries: no anti-damping)
@@ -394,7 +413,14 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 compensated = getattr(state, "q_lo", None) is not None and getattr(trial, "q_lo", None) is not None
                 ls = 0
                 arc_tried = False
+                correction = None       # the second-order correction, once computed
+                unsafe_at = None        # the fraction at which its arc was last found not provably free of passage
                 while ls < options.line_search_steps:
+                    if correction is not None and arc is None and a != unsafe_at and arc_every:
+                        # a shorter arc may be proven free of passage where a longer one was not (its deviation
+                        # from the chord shrinks as a^2): each fraction tries the arc first, the straight step where
+                        # the proof fails
+                        arc = correction
                     if arc is None and step_lo is None:
                         if compensated:
                             add_compensated(state.q, state.q_lo, a, delta, trial.q, trial.q_lo)
@@ -427,6 +453,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                         # (a <= the CCD-safe fraction a_start); at ls = 0 the straight step at this a was refused
                         # already, so halve rather than evaluate it again
                         arc = None
+                        unsafe_at = a
                         if ls == 0:
                             a *= 0.5
                             ls += 1
@@ -441,7 +468,7 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                     if arc is None and ls == 0 and soc and not arc_tried:
                         # the full step was refused: correct it for the chord error of the edges it turns and
                         # try the full step again along the arc (one solve with the same factors)
-                        arc = second_order_correction(system, state, delta, resolve)
+                        arc = correction = second_order_correction(system, state, delta, resolve)
                         arc_tried = True
                         if arc is not None:
                             system.linear_solves["second_order"] = system.linear_solves.get("second_order", 0) + 1
@@ -531,6 +558,10 @@ def _contact_solve(system, work, coo, R, factors=None):
     from scipy.sparse.linalg import splu
 
     n = work.shape[1]
+    if CONTACT_SYMMETRIC and system.kl == system.ku:
+        from ..contact.reorder import symmetric_part
+
+        symmetric_part(work, system.kl, system.ku)
     fixed = system.fixed
     rows, cols, vals = [], [], []
     for r, c, v in coo:

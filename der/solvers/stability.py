@@ -572,6 +572,229 @@ def _edge_block_lanczos(ez, L, D, k, tol=EDGE_LANCZOS_TOL, block=EDGE_LANCZOS_BL
     return None
 
 
+# The block Lanczos above, in numba sweeps over the long vectors (``_edge_block_lanczos_fused``): the same
+# recurrence, the same Gram-Schmidt (the last two blocks, then the whole basis) and Cholesky QR twice, but each pass
+# over the basis a chunked sweep that subtracts one set of coefficients and accumulates the next dot products in the
+# same read (numpy's products read the basis once per operation and make a fresh temporary of every update), and
+# the operator's scatter, cumulative sums and gather in two sweeps around the factor's solve. The previous function
+# stays as the measured baseline (``EDGE_LANCZOS = "baseline"``, tools/stability_scaling.py --baseline).
+
+EDGE_LANCZOS = "fused"      # "fused" (_edge_block_lanczos_fused) or "baseline" (_edge_block_lanczos)
+EDGE_LANCZOS_TOL_REST = 1e-7  # the fused path's relative residual for the Ritz pairs other than the lowest
+_SWEEP_CHUNK = 512          # columns per chunk of a sweep (the block's slice of W stays in the first-level cache)
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _lanczos_sweep(Q, W, sub_lo, sub_hi, hsub, dot_lo, dot_hi, hdot, gram):
+    """One chunked sweep over the columns: W[c] -= sum_{r in [sub_lo, sub_hi)} hsub[r - sub_lo, c] Q[r], then
+    hdot[r - dot_lo, c] = Q[r] . W[c] for r in [dot_lo, dot_hi) and gram[c, d] = W[c] . W[d] of the updated W
+    (hdot and gram overwritten)."""
+    b, n = W.shape
+    hdot[:, :] = 0.0
+    gram[:, :] = 0.0
+    buf = np.empty((b, _SWEEP_CHUNK))          # W's chunk (a local array: no aliasing with Q, the loops vectorise)
+    for i0 in range(0, n, _SWEEP_CHUNK):
+        i1 = min(n, i0 + _SWEEP_CHUNK)
+        w = i1 - i0
+        for c in range(b):
+            for i in range(w):
+                buf[c, i] = W[c, i0 + i]
+        for r in range(sub_lo, sub_hi):
+            q = Q[r, i0:i1]
+            for c in range(b):
+                a = hsub[r - sub_lo, c]
+                if a != 0.0:
+                    for i in range(w):
+                        buf[c, i] -= a * q[i]
+        if sub_hi > sub_lo:
+            for c in range(b):
+                for i in range(w):
+                    W[c, i0 + i] = buf[c, i]
+        for r in range(dot_lo, dot_hi):
+            q = Q[r, i0:i1]
+            for c in range(b):
+                s = 0.0
+                for i in range(w):
+                    s += q[i] * buf[c, i]
+                hdot[r - dot_lo, c] += s
+        for c in range(b):
+            for d in range(c + 1):
+                s = 0.0
+                for i in range(w):
+                    s += buf[c, i] * buf[d, i]
+                gram[c, d] += s
+    for c in range(b):
+        for d in range(c):
+            gram[d, c] = gram[c, d]
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _lanczos_scale(W, Cinv, out, gram):
+    """out <- Cinv W (Cinv lower triangular, rows; ``out`` may be ``W`` itself) and gram <- out out^T."""
+    b, n = W.shape
+    gram[:, :] = 0.0
+    buf = np.empty((b, _SWEEP_CHUNK))
+    res = np.empty((b, _SWEEP_CHUNK))
+    for i0 in range(0, n, _SWEEP_CHUNK):
+        i1 = min(n, i0 + _SWEEP_CHUNK)
+        w = i1 - i0
+        for c in range(b):
+            for i in range(w):
+                buf[c, i] = W[c, i0 + i]
+        for c in range(b):
+            for i in range(w):
+                res[c, i] = 0.0
+            for d in range(c + 1):
+                a = Cinv[c, d]
+                for i in range(w):
+                    res[c, i] += a * buf[d, i]
+        for c in range(b):
+            for i in range(w):
+                out[c, i0 + i] = res[c, i]
+            for d in range(c + 1):
+                s = 0.0
+                for i in range(w):
+                    s += res[c, i] * res[d, i]
+                gram[c, d] += s
+    for c in range(b):
+        for d in range(c):
+            gram[d, c] = gram[c, d]
+
+
+@njit(cache=True)
+def _edge_apply_block_fused(W, out, Zout, Z, L, D, slot, root, fixed_idx, tri_dep, tri_master, tri_coef, n_nodes):
+    """``_edge_apply_block`` in two sweeps around the solve: ``slot`` (n_dof,) the index of each DOF among the
+    massive ones (-1: massless), ``fixed_idx`` the held slots. The scatter M^1/2 w and the suffix sums T^T in one
+    backward sweep over the nodes; the links T_L, the prefix sums T, the copy of z and the gather M^1/2 in one
+    forward sweep."""
+    m = W.shape[0]
+    acc = np.zeros((3, m))
+    for node in range(n_nodes - 1, -1, -1):
+        for a in range(4):
+            i = 4 * node + a
+            j = slot[i]
+            if a < 3:
+                for c in range(m):
+                    if j >= 0:
+                        acc[a, c] += root[j] * W[c, j]
+                    Z[i, c] = acc[a, c]
+            else:
+                for c in range(m):
+                    Z[i, c] = root[j] * W[c, j] if j >= 0 else 0.0
+    for k in range(tri_dep.shape[0]):          # T_L^T
+        for c in range(m):
+            Z[tri_master[k], c] += tri_coef[k] * Z[tri_dep[k], c]
+    for t in range(fixed_idx.shape[0]):
+        for c in range(m):
+            Z[fixed_idx[t], c] = 0.0
+    ldlt_compact_solve_block(L, D, Z)
+    for k in range(tri_dep.shape[0]):          # T_L: the dependents from their masters
+        for c in range(m):
+            Z[tri_dep[k], c] = 0.0
+    for k in range(tri_dep.shape[0]):
+        for c in range(m):
+            Z[tri_dep[k], c] += tri_coef[k] * Z[tri_master[k], c]
+    acc[:, :] = 0.0
+    for node in range(n_nodes):
+        for a in range(4):
+            i = 4 * node + a
+            j = slot[i]
+            for c in range(m):
+                v = Z[i, c]
+                Zout[c, i] = v
+                if a < 3:
+                    acc[a, c] += v
+                    v = acc[a, c]
+                if j >= 0:
+                    out[c, j] = root[j] * v
+
+
+def _cholesky_inverse(G):
+    """(C^-1, C) for the lower Cholesky factor C of the small Gram matrix G, or None if Cholesky refuses it."""
+    try:
+        C = np.linalg.cholesky(G)
+    except np.linalg.LinAlgError:
+        return None
+    return np.linalg.inv(C), C
+
+
+def _edge_block_lanczos_fused(ez, L, D, k, tol=EDGE_LANCZOS_TOL, block=EDGE_LANCZOS_BLOCK,
+                              max_dim=EDGE_LANCZOS_MAX_DIM, tol_rest=None):
+    """``_edge_block_lanczos`` (the same recurrence, residual test, result and None) with its passes over the long
+    vectors as numba sweeps (``_lanczos_sweep``, ``_lanczos_scale``, ``_edge_apply_block_fused``) and a seeded
+    uniform start block. The Ritz pair of the lowest eigenvalue (the reported one) must reach ``tol``, the others
+    ``tol_rest`` (default ``EDGE_LANCZOS_TOL_REST``: their eigenvalues' errors are quadratic in it, 1e-13 relative
+    on the cantilever at 10^3-10^5, one pass of ten saved). A block whose Gram matrix Cholesky refuses
+    (numerically rank-deficient) falls back to the baseline function."""
+    if tol_rest is None:
+        tol_rest = EDGE_LANCZOS_TOL_REST
+    n_m = ez.massive.size
+    max_dim = min(max_dim, n_m - block)
+    if max_dim < k + block:
+        return None
+    slot = np.full(ez.n_dof, -1, dtype=np.int64)
+    slot[ez.massive] = np.arange(n_m)
+    args = (L, D, slot, ez.root, np.flatnonzero(ez.fixed), ez.tri_dep, ez.tri_master, ez.tri_coef, ez.N)
+    Q = np.empty((max_dim + block, n_m))
+    Zs = np.empty((max_dim, ez.n_dof))
+    H = np.zeros((max_dim, max_dim))
+    W = np.empty((block, n_m))
+    scratch = np.empty((ez.n_dof, block))
+    gram = np.empty((block, block))
+    hloc = np.empty((2 * block, block))
+    hfull = np.empty((max_dim, block))
+    none = np.zeros((0, block))
+    Q[:block] = np.random.default_rng(0).random((block, n_m)) - 0.5
+    _lanczos_sweep(Q, Q[:block], 0, 0, none, 0, 0, hloc[:0], gram)
+    for _ in range(2):
+        got = _cholesky_inverse(gram)
+        if got is None:
+            return _edge_block_lanczos(ez, L, D, k, tol, block, max_dim)
+        _lanczos_scale(Q[:block], got[0], Q[:block], gram)
+    m = 0
+    passes = 0
+    while m + block <= max_dim:
+        m1 = m + block
+        _edge_apply_block_fused(Q[m:m1], W, Zs[m:m1], scratch, *args)
+        passes += 1
+        # Gram-Schmidt against the last two blocks (their dots in one sweep), then against the whole basis (its
+        # dots in the sweep that subtracts the first; its subtraction in a third, with W's Gram matrix)
+        lo = max(0, m - block)
+        hl = hloc[:m1 - lo]
+        _lanczos_sweep(Q, W, 0, 0, none, lo, m1, hl, gram)
+        hf = hfull[:m1]
+        _lanczos_sweep(Q, W, lo, m1, hl, 0, m1, hf, gram)
+        h = hf.copy()
+        h[lo:] += hl
+        _lanczos_sweep(Q, W, 0, m1, hf, 0, 0, hloc[:0], gram)
+        H[:m1, m:m1] = h
+        H[m:m1, :m1] = h.T
+        # Cholesky QR twice into the next block: W = Q_new B, B = C2^T C1^T
+        Qn = Q[m1:m1 + block]
+        got = _cholesky_inverse(gram)
+        if got is None:
+            return _edge_block_lanczos(ez, L, D, k, tol, block, max_dim)
+        _lanczos_scale(W, got[0], Qn, gram)
+        got2 = _cholesky_inverse(gram)
+        if got2 is None:
+            return _edge_block_lanczos(ez, L, D, k, tol, block, max_dim)
+        _lanczos_scale(Qn, got2[0], Qn, gram)
+        B = got2[1].T @ got[1].T
+        theta, S = np.linalg.eigh(0.5 * (H[:m1, :m1] + H[:m1, :m1].T))
+        order = np.argsort(-np.abs(theta))[:k]
+        if m1 >= k:
+            res = np.linalg.norm(B @ S[m:m1, order], axis=0) / np.maximum(np.abs(theta[order]), 1e-300)
+            lim = np.full(res.size, tol_rest)
+            with np.errstate(divide="ignore"):
+                lim[np.argmin(1.0 / theta[order])] = tol
+            if np.all(res <= lim) and np.all(theta[order] != 0.0):
+                mu = theta[order]
+                z = (S[:, order].T @ Zs[:m1]) / mu[:, None]
+                return 1.0 / mu, list(z), passes
+        m = m1
+    return None
+
+
 def _edge_eigen(ez, abz_raw, k):
     """The k eigenpairs nearest zero in edge coordinates (K_e = ``abz_raw``, before the supports' links are
     condensed): one banded LDL^T of K (``band_ldlt_compact``, no
@@ -633,7 +856,8 @@ def _edge_eigen_factorised(ez, work, k):
 
         if not _test_solve_is_round_off(ez, work, solve):
             return None
-    got = _edge_block_lanczos(ez, f.L, f.D, k)
+    lanczos = _edge_block_lanczos_fused if EDGE_LANCZOS == "fused" else _edge_block_lanczos
+    got = lanczos(ez, f.L, f.D, k)
     if got is not None:
         ev, z, passes = got
         return ev, z, int(neg), f"block Lanczos, {passes} passes of {EDGE_LANCZOS_BLOCK}"

@@ -906,17 +906,25 @@ def _edge_checks(abz, kb, Zr, lam, mass, n_nodes, tri_dep, tri_master, tri_coef,
     for c in range(k):
         for i in range(n):
             full[i, c] = Zr[c, i]
-    KZ = np.zeros((n, k))
-    AZ = np.zeros((n, k))
-    for j in range(n):                          # K_e z and |K_e| |z|, the k vectors side by side
-        for i in range(max(0, j - kb), min(n - 1, j + kb) + 1):
+    KZ = np.empty((n, k))
+    AZ = np.empty((n, k))
+    s = np.empty(k)
+    sa = np.empty(k)
+    for i in range(n):                          # K_e z and |K_e| |z|, the k vectors side by side, by rows
+        for c in range(k):
+            s[c] = 0.0
+            sa[c] = 0.0
+        for j in range(max(0, i - kb), min(n - 1, i + kb) + 1):
             a = abz[off + i - j, j]
             if a == 0.0:
                 continue
             for c in range(k):
                 v = a * full[j, c]
-                KZ[i, c] += v
-                AZ[i, c] += abs(v)
+                s[c] += v
+                sa[c] += abs(v)
+        for c in range(k):
+            KZ[i, c] = s[c]
+            AZ[i, c] = sa[c]
     for a in range(3):
         for c in range(k):                      # x = T z: prefix sums
             acc = 0.0

@@ -4,7 +4,9 @@ A1/L^2), solved with ``edge_newton=True``; then ``stability`` on a fresh system 
 which ``der.solve`` would reuse), ``--repeat`` times, with the CPU time (``time.process_time``, one BLAS thread) of
 the analysis's parts accumulated by wrapping them (cumulative: a part includes the parts it calls).
 
-    python tools/stability_profile.py [--n 10000 100000] [--repeat 3]
+    python tools/stability_profile.py [--n 10000 100000] [--repeat 3] [--baseline]
+
+``--baseline``: the previous block Lanczos (``stability.EDGE_LANCZOS = "baseline"``) instead of the numba sweeps.
 """
 import os
 
@@ -20,7 +22,8 @@ import der  # noqa: E402
 import der.solvers.stability as st  # noqa: E402
 from der.solvers.system import build_system  # noqa: E402
 
-PARTS = ["evaluate_system", "_edge_eigen", "band_ldlt_compact", "_edge_block_lanczos", "_edge_apply_block",
+PARTS = ["evaluate_system", "_edge_eigen", "band_ldlt_compact", "_edge_block_lanczos_fused", "_edge_apply_block_fused",
+         "_lanczos_sweep", "_lanczos_scale", "_edge_block_lanczos", "_edge_apply_block",
          "_cholesky_qr", "_edge_out", "_edge_checks", "band_asymmetry", "symmetry_modes"]
 
 
@@ -28,7 +31,10 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, nargs="+", default=[10000, 100000])
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--baseline", action="store_true", help="the previous block Lanczos")
     args = ap.parse_args()
+    if args.baseline:
+        st.EDGE_LANCZOS = "baseline"
     acc = {}
 
     def wrap(name):

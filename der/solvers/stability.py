@@ -73,14 +73,17 @@ e_j = x_{j+1} - x_j and the angles. Its stiffness K_e = T^T K T (T: cumulative s
 invariance in a few terms per entry, without the cancellation of the node-coordinate entries, and checked
 (K x = T^-T K_e T^-1 x on a random vector to round-off, else node coordinates); it is banded (half-bandwidth 7
 against 10). The mass T^T M T is dense but only applied, by cumulative sums, and factored as R^T R, R = M^1/2 T:
-block Lanczos (``_edge_block_lanczos``; ARPACK if it does not converge within its basis) runs on R K_e^-1 R^T,
+block Lanczos (``_edge_block_lanczos_fused``; ARPACK if it does not converge within its basis) runs on R K_e^-1 R^T,
 shift-invert at sigma = 0 on one banded LDL^T of K_e (``linalg.band_ldlt_compact``), whose pivots count the
 negative eigenvalues exactly (Sylvester) -- the stability verdict. Two right-hand sides per pass over the factor
 (a straight rod bends alike in two planes: single-vector Lanczos, ARPACK's, needs round-off to find the second of
 each degenerate pair, and missed the second 3806.5 of the cantilever at n = 10^4, returning 14617 in its place);
-the Ritz pairs are residual-checked by the block Lanczos relation after every pass and the loop stops when the k
-wanted are all below 1e-9 (relative), 9-10 passes for k = 6 on the cantilever; the eigenvectors are the same
-combinations of the stored solves. When the analysis follows der.solve's implicit solver, the Hessian at the final
+the Ritz pairs are residual-checked by the block Lanczos relation after every pass and the loop stops when the
+lowest eigenvalue's pair is below 1e-9 (relative) and the other k - 1 below 1e-7 (their eigenvalues' errors are
+quadratic in it), 8-9 passes for k = 6 on the cantilever; the eigenvectors are the same combinations of the stored
+solves. Its passes over the long vectors are numba sweeps (``_edge_block_lanczos_fused``): at 10^5 the previous
+numpy products (``EDGE_LANCZOS = "baseline"``, kept for comparison) made a fresh 6 MB temporary per update, whose
+page faults cost 0.1-0.3 s of system time per analysis. When the analysis follows der.solve's implicit solver, the Hessian at the final
 state comes from the solver's last force evaluation (``system.take_hessian``). The eigenvalues' round-off floors
 grow like eps n^2 (cantilever, lowest eigenvalue: error 8e-9 at n = 10^4, 4e-7 at 10^5, against its floor 3e-6;
 3.6e-9 at 10^5 for the loaded state solved with ``edge_newton``). Residuals
@@ -925,35 +928,50 @@ def _edge_checks(abz, kb, Zr, lam, mass, n_nodes, tri_dep, tri_master, tri_coef,
         for c in range(k):
             KZ[i, c] = s[c]
             AZ[i, c] = sa[c]
-    for a in range(3):
-        for c in range(k):                      # x = T z: prefix sums
-            acc = 0.0
-            for node in range(n_nodes):
-                acc += full[4 * node + a, c]
-                full[4 * node + a, c] = acc
-        for node in range(n_nodes - 1):         # T^-T: differences
+    acc = np.zeros((3, k))
+    for node in range(n_nodes):                 # x = T z: prefix sums, the k vectors in one sweep
+        for a in range(3):
+            i = 4 * node + a
+            for c in range(k):
+                acc[a, c] += full[i, c]
+                full[i, c] = acc[a, c]
+    for node in range(n_nodes - 1):             # T^-T: differences
+        for a in range(3):
             for c in range(k):
                 KZ[4 * node + a, c] -= KZ[4 * (node + 1) + a, c]
-    out = np.zeros((5, k))
-    r = np.empty(n)
-    cm = np.empty(n)
+    # T_L^T on the node coordinates' free variables touches only the first p slots (the start's links): r and c
+    # there first, the links applied in their order; then one sweep over all slots
+    p = 0
+    for t in range(tri_dep.shape[0]):
+        p = max(p, tri_master[t] + 1, tri_dep[t] + 1)
+    rp = np.empty((p, k))
+    cp = np.empty((p, k))
     for c in range(k):
-        for i in range(n):
+        for i in range(p):
             mx = mass[i] * full[i, c]
-            r[i] = KZ[i, c] - lam[c] * mx
-            cm[i] = mx
+            rp[i, c] = KZ[i, c] - lam[c] * mx
+            cp[i, c] = mx
+        for t in range(tri_dep.shape[0]):
+            rp[tri_master[t], c] += tri_coef[t] * rp[tri_dep[t], c]
+            cp[tri_master[t], c] += tri_coef[t] * cp[tri_dep[t], c]
+    out = np.zeros((5, k))
+    for i in range(n):
+        for c in range(k):
+            mx = mass[i] * full[i, c]
+            if i < p:
+                ri = rp[i, c]
+                ci = cp[i, c]
+            else:
+                ri = KZ[i, c] - lam[c] * mx
+                ci = mx
             out[2, c] += AZ[i, c] * AZ[i, c]
             out[3, c] += AZ[i, c] * abs(Zr[c, i])
             out[4, c] += full[i, c] * mx
-        for t in range(tri_dep.shape[0]):       # T_L^T on the node coordinates' free variables
-            r[tri_master[t]] += tri_coef[t] * r[tri_dep[t]]
-            cm[tri_master[t]] += tri_coef[t] * cm[tri_dep[t]]
-        for i in range(n):
             if fixed[i]:
                 full[i, c] = 0.0
                 continue
-            out[0, c] += r[i] * r[i]
-            out[1, c] += cm[i] * cm[i]
+            out[0, c] += ri * ri
+            out[1, c] += ci * ci
     return out
 
 

@@ -80,11 +80,12 @@ negative eigenvalues exactly (Sylvester) -- the stability verdict. Two right-han
 each degenerate pair, and missed the second 3806.5 of the cantilever at n = 10^4, returning 14617 in its place);
 the Ritz pairs are residual-checked by the block Lanczos relation after every pass and the loop stops when the
 lowest eigenvalue's pair is below 1e-9 (relative) and the other k - 1 below 1e-7 (their eigenvalues' errors are
-quadratic in it), 8-9 passes for k = 6 on the cantilever; the eigenvectors are the same combinations of the stored
-solves. Its passes over the long vectors are numba sweeps (``_edge_block_lanczos_fused``): at 10^5 the previous
-numpy products (``EDGE_LANCZOS = "baseline"``, kept for comparison) made a fresh 6 MB temporary per update, whose
-page faults cost 0.1-0.3 s of system time per analysis. When the analysis follows der.solve's implicit solver, the Hessian at the final
-state comes from the solver's last force evaluation (``system.take_hessian``). The eigenvalues' round-off floors
+quadratic in it), 8-9 passes for k = 6 on the cantilever; the eigenvectors by k / 2 more passes on the Ritz
+vectors. Its passes over the long vectors are numba sweeps (``_edge_block_lanczos_fused``): at 10^5 the previous
+numpy products (``EDGE_LANCZOS = "baseline"``, kept for comparison; it stores every pass's solves for the
+eigenvectors) made a fresh 6 MB temporary per update, and inside der.solve fresh pages cost the baseline 0.33-0.38
+s of system time per analysis against 0.02-0.11 s. When the analysis follows der.solve's implicit solver, the
+Hessian at the final state comes from the solver's last force evaluation (``system.take_hessian``). The eigenvalues' round-off floors
 grow like eps n^2 (cantilever, lowest eigenvalue: error 8e-9 at n = 10^4, 4e-7 at 10^5, against its floor 3e-6;
 3.6e-9 at 10^5 for the loaded state solved with ``edge_newton``). Residuals
 are evaluated in node coordinates, K x as T^-T K_e z (differences), with their round-off level (eps n^3 for a
@@ -665,11 +666,12 @@ def _lanczos_scale(W, Cinv, out, gram):
 
 
 @njit(cache=True)
-def _edge_apply_block_fused(W, out, Zout, Z, L, D, slot, root, fixed_idx, tri_dep, tri_master, tri_coef, n_nodes):
+def _edge_apply_block_fused(W, out, Zout, Z, L, D, slot, root, fixed_idx, tri_dep, tri_master, tri_coef, n_nodes,
+                            keep_z=True):
     """``_edge_apply_block`` in two sweeps around the solve: ``slot`` (n_dof,) the index of each DOF among the
     massive ones (-1: massless), ``fixed_idx`` the held slots. The scatter M^1/2 w and the suffix sums T^T in one
-    backward sweep over the nodes; the links T_L, the prefix sums T, the copy of z and the gather M^1/2 in one
-    forward sweep."""
+    backward sweep over the nodes; the links T_L, the prefix sums T, the copy of z (``Zout``, only if ``keep_z``)
+    and the gather M^1/2 in one forward sweep."""
     m = W.shape[0]
     acc = np.zeros((3, m))
     for node in range(n_nodes - 1, -1, -1):
@@ -704,7 +706,8 @@ def _edge_apply_block_fused(W, out, Zout, Z, L, D, slot, root, fixed_idx, tri_de
             j = slot[i]
             for c in range(m):
                 v = Z[i, c]
-                Zout[c, i] = v
+                if keep_z:
+                    Zout[c, i] = v
                 if a < 3:
                     acc[a, c] += v
                     v = acc[a, c]
@@ -739,7 +742,6 @@ def _edge_block_lanczos_fused(ez, L, D, k, tol=EDGE_LANCZOS_TOL, block=EDGE_LANC
     slot[ez.massive] = np.arange(n_m)
     args = (L, D, slot, ez.root, np.flatnonzero(ez.fixed), ez.tri_dep, ez.tri_master, ez.tri_coef, ez.N)
     Q = np.empty((max_dim + block, n_m))
-    Zs = np.empty((max_dim, ez.n_dof))
     H = np.zeros((max_dim, max_dim))
     W = np.empty((block, n_m))
     scratch = np.empty((ez.n_dof, block))
@@ -758,7 +760,7 @@ def _edge_block_lanczos_fused(ez, L, D, k, tol=EDGE_LANCZOS_TOL, block=EDGE_LANC
     passes = 0
     while m + block <= max_dim:
         m1 = m + block
-        _edge_apply_block_fused(Q[m:m1], W, Zs[m:m1], scratch, *args)
+        _edge_apply_block_fused(Q[m:m1], W, W, scratch, *args, False)   # (the solves themselves not kept)
         passes += 1
         # Gram-Schmidt against the last two blocks (their dots in one sweep), then against the whole basis (its
         # dots in the sweep that subtracts the first; its subtraction in a third, with W's Gram matrix)
@@ -791,8 +793,18 @@ def _edge_block_lanczos_fused(ez, L, D, k, tol=EDGE_LANCZOS_TOL, block=EDGE_LANC
             with np.errstate(divide="ignore"):
                 lim[np.argmin(1.0 / theta[order])] = tol
             if np.all(res <= lim) and np.all(theta[order] != 0.0):
+                # the eigenvectors z = K^-1 R^T y / mu of the Ritz vectors y, by ceil(k / block) more passes in the
+                # buffers already touched, rather than storing every pass's solves: at 10^5 their 64 MB of fresh
+                # pages cost 0.1-0.2 s of system time inside der.solve
                 mu = theta[order]
-                z = (S[:, order].T @ Zs[:m1]) / mu[:, None]
+                z = np.empty((k, ez.n_dof))
+                for j0 in range(0, k, block):
+                    j1 = min(k, j0 + block)
+                    y = W[:j1 - j0]
+                    np.matmul(S[:, order[j0:j1]].T, Q[:m1], out=y)
+                    sc = scratch if j1 - j0 == block else np.empty((ez.n_dof, j1 - j0))
+                    _edge_apply_block_fused(y, Q[m1:m1 + j1 - j0], z[j0:j1], sc, *args, True)
+                    z[j0:j1] /= mu[j0:j1, None]
                 return 1.0 / mu, list(z), passes
         m = m1
     return None

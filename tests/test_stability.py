@@ -330,3 +330,56 @@ def test_writhed_ring_is_stable_once_material_sliding_is_removed(monkeypatch):
     # near zero against the bending scale (-1.2e-4 at n = 40, -3.0e-4 at n = 80 with the solve's penalty state;
     # its size follows the inextensibility penalty, not h^2 alone: see the module docstring)
     assert all(-0.02 * 0.03 < lam < 0 for lam in sliding)
+
+
+@pytest.mark.parametrize("case", ["loaded", "euler_above"])
+def test_fused_block_lanczos_matches_the_baseline(case, monkeypatch):
+    """The edge analysis's block Lanczos in numba sweeps (``EDGE_LANCZOS = "fused"``, the default) returns the
+    eigenpairs of the previous numpy implementation (``"baseline"``): the same eigenvalues and inertia, the lowest
+    eigenpair residual-checked to 1e-9, the others to 1e-7 (``EDGE_LANCZOS_TOL_REST``); its operator pass
+    (``_edge_apply_block_fused``) gives the baseline pass's vectors bit for bit. Above the Euler load (two negative
+    eigenvalues by inertia, the test solve accepting the indefinite factor) as below it."""
+    import der.solvers.stability as st
+    from der.linalg import BandLDLT, band_ldlt_compact, constrain_band
+    from der.solvers.edge_coordinates import EDGE_BAND, EdgeCoordinates
+
+    n = 200
+    rod = der.rod_from_shape(der.shapes.straight(1.0, n, director=(1, 0, 0)), 1.0, 1.0)
+    load = [1e-3, 0, 0] if case == "loaded" else [0, 0, -1.1 * np.pi ** 2 / 4]
+    scene = der.Scene(rod, loads=[der.end_force(load)], constraints=[der.clamp("start")])
+    res = der.solve(scene, stability=False)
+    assert res.converged
+    out = {}
+    for variant in ("baseline", "fused"):
+        monkeypatch.setattr(st, "EDGE_LANCZOS", variant)
+        out[variant] = lowest_modes(build_system(scene, der.SolverOptions()), res.state, 6)
+    base, fused = out["baseline"], out["fused"]
+    assert base["method"] == fused["method"] == "edge shift-invert"
+    assert "block Lanczos" in fused["eigen_solver"] and base["inertia"] == fused["inertia"]
+    assert fused["inertia"][0] == {"loaded": 0, "euler_above": 2}[case]
+    scale = np.abs(base["eigenvalues"]).max()
+    assert np.abs(fused["eigenvalues"] - base["eigenvalues"]).max() < 1e-9 * scale
+    assert fused["residuals"][0] < 10 * fused["residual_floors"][0] + 1e-9
+    assert fused["residuals"].max() < 1e-6
+    # the operator pass alone, on the factor of the loaded K_e: the same vectors as the baseline's
+    system = build_system(scene, der.SolverOptions())
+    evaluate_system(system, res.state, 2)
+    ez = EdgeCoordinates(system, res.state, eigen_mass(rod))
+    abz = ez.band(system.ab, system.kl, system.ku)
+    constrain_band(abz, EDGE_BAND, EDGE_BAND, ez.perm, ez.fixed, 1.0)
+    if ez.tri_dep.size == 0:
+        f = BandLDLT(ez.n_dof, EDGE_BAND)
+        f.ensure(ez.n_dof, EDGE_BAND)
+        band_ldlt_compact(abz, EDGE_BAND, EDGE_BAND, f.L, f.D)
+        n_m = ez.massive.size
+        W = np.random.default_rng(1).standard_normal((2, n_m))
+        o1, o2 = np.empty((2, n_m)), np.empty((2, n_m))
+        z1, z2 = np.empty((2, ez.n_dof)), np.empty((2, ez.n_dof))
+        scratch = np.empty((ez.n_dof, 2))
+        st._edge_apply_block(W, o1, z1, scratch, f.L, f.D, ez.massive, ez.root, ez.fixed, ez.tri_dep,
+                             ez.tri_master, ez.tri_coef, ez.N)
+        slot = np.full(ez.n_dof, -1, dtype=np.int64)
+        slot[ez.massive] = np.arange(n_m)
+        st._edge_apply_block_fused(W, o2, z2, scratch, f.L, f.D, slot, ez.root, np.flatnonzero(ez.fixed),
+                                   ez.tri_dep, ez.tri_master, ez.tri_coef, ez.N)
+        assert np.array_equal(o1, o2) and np.array_equal(z1, z2)

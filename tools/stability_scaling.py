@@ -3,10 +3,14 @@ rho_A = 1, L = 1) under a small transverse tip load 1e-4 A1/L^2 (so that the sol
 moves the eigenvalue by O(1e-8)); the lowest eigenvalue of the pencil (K, M) is compared with the Euler-Bernoulli
 value (1.8751041)^4 A1/(rho_A L^4) = 12.362363.
 
-    python tools/stability_scaling.py [--n 1000 10000 100000] [--edge-newton] [--repeat 3] [--threads 1] [--json]
+    python tools/stability_scaling.py [--n 1000 10000 100000] [--edge-newton | --both] [--baseline] [--repeat 3]
+                                      [--threads 1] [--json]
 
 ``--edge-newton`` solves with ``SolverOptions(edge_newton=True)`` (Newton steps in edge coordinates: the loaded
-solve converges at n = 10^5, where node-coordinate steps are round-off). ``--threads`` sets
+solve converges at n = 10^5, where node-coordinate steps are round-off); ``--both`` gives the rows of both solvers.
+``--baseline`` times the analysis also with the previous block Lanczos (``stability.EDGE_LANCZOS = "baseline"``:
+numpy products, a temporary per update) beside the current one (numba sweeps), the two alternating run by run in
+the same process, and prints both CPU times and ratios side by side ("base cpu", "base ratio"). ``--threads`` sets
 OPENBLAS_NUM_THREADS/OMP_NUM_THREADS before numpy loads (default 1: on a shared, loaded machine threaded BLAS
 costs more than it saves; 0 leaves them alone).
 
@@ -44,6 +48,7 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
 import der  # noqa: E402
+import der.solvers.stability as _stability  # noqa: E402
 from der.solvers.stability import lowest_modes, stability  # noqa: E402
 from der.solvers.system import build_system, prepare_state  # noqa: E402
 
@@ -61,8 +66,19 @@ def _least_cpu(fn, repeat):
     return best, out
 
 
-def row(n, load=None, edge_newton=False, repeat=3):
+def _with_lanczos(variant, fn):
+    """``fn()`` with the edge analysis's block Lanczos ``variant`` ("fused" or "baseline")."""
+    old = _stability.EDGE_LANCZOS
+    _stability.EDGE_LANCZOS = variant
+    try:
+        return fn()
+    finally:
+        _stability.EDGE_LANCZOS = old
+
+
+def row(n, load=None, edge_newton=False, repeat=3, baseline=False):
     load = P if load is None else load
+    variants = ["fused", "baseline"] if baseline else ["fused"]
     rod = der.rod_from_shape(der.shapes.straight(1.0, n, axis=(0, 0, 1), director=(1, 0, 0)), 1.0, 1.0)
     scene = der.Scene(rod, loads=[der.end_force([load, 0, 0])], constraints=[der.clamp("start")])
     options = der.SolverOptions(edge_newton=True) if edge_newton else der.SolverOptions()
@@ -70,11 +86,22 @@ def row(n, load=None, edge_newton=False, repeat=3):
         # CPU times side by side: the solve alone, then the solve with the analysis der.solve runs after it
         cpu_solve, r0 = _least_cpu(lambda: der.solve(scene, options=options, progress=False, stability=False),
                                    repeat)
-        runs = [_least_cpu(lambda: der.solve(scene, options=options, progress=False), 1) for _ in range(repeat)]
-        cpu_both = min(c for c, _ in runs)
-        res = runs[-1][1]
+        # (with --baseline the two Lanczos variants alternate run by run: the same machine state for both)
+        runs = {v: [] for v in variants}
+        for _ in range(repeat):
+            for v in variants:
+                runs[v].append(_with_lanczos(v, lambda: _least_cpu(
+                    lambda: der.solve(scene, options=options, progress=False), 1)))
+        cpu_both = min(c for c, _ in runs["fused"])
+        res = runs["fused"][-1][1]
         # the analysis's own CPU time (result.stability_cpu_time: with the Hessian's assembly at the final state)
-        cpu_stab = min(r.stability_cpu_time for _, r in runs)
+        cpu_stab = min(r.stability_cpu_time for _, r in runs["fused"])
+        base = {}
+        if baseline:
+            rb = runs["baseline"][-1][1]
+            base = {"cpu_stability_baseline_s": min(r.stability_cpu_time for _, r in runs["baseline"]),
+                    "lowest_baseline": float(rb.min_eigenvalue)}
+            base["cpu_ratio_baseline"] = base["cpu_stability_baseline_s"] / cpu_solve
     except der.ConvergenceError as exc:
         # the loaded solve failed (at n = 10^5 Newton's steps in node coordinates are round-off: the stiffness's
         # condition number grows like n^4). No analysis of an uncertified state: the analysis alone is timed at an
@@ -86,6 +113,13 @@ def row(n, load=None, edge_newton=False, repeat=3):
         res = der.SolveResult(state=state, converged=True, status="", residual=float("nan"), iterations=0,
                               wall_time=0.0, message="the rest state")
         cpu_stab, _ = _least_cpu(lambda: stability(system, res), repeat)
+        base = {}
+        if baseline:
+            rb = der.SolveResult(state=state, converged=True, status="", residual=float("nan"), iterations=0,
+                                 wall_time=0.0, message="the rest state")
+            base["cpu_stability_baseline_s"] = _with_lanczos("baseline", lambda: _least_cpu(
+                lambda: stability(system, rb), repeat))[0]
+            base["lowest_baseline"] = float(rb.min_eigenvalue)
         out = lowest_modes(build_system(rest, der.SolverOptions()), state, 6)
         lam = float(res.min_eigenvalue)
         return {"n": n, "edge_newton": edge_newton, "solve_s": r.wall_time, "iterations": r.iterations,
@@ -94,7 +128,7 @@ def row(n, load=None, edge_newton=False, repeat=3):
                 "rel_error": (lam - EXACT) / EXACT, "rel_residual": float(out["residuals"][0]),
                 "residual_floor": float(out.get("residual_floors", [np.nan])[0]),
                 "floor": float(out["floors"][0]), "method": out["method"],
-                "eigen_solver": out.get("eigen_solver", ""), "note": res.stability_note}
+                "eigen_solver": out.get("eigen_solver", ""), "note": res.stability_note, **base}
     out = lowest_modes(build_system(scene, der.SolverOptions()), res.state, 6)
     lam = float(res.min_eigenvalue)
     return {"n": n, "edge_newton": edge_newton, "load": load, "solve_s": r0.wall_time, "iterations": res.iterations,
@@ -104,38 +138,53 @@ def row(n, load=None, edge_newton=False, repeat=3):
             "rel_error": (lam - EXACT) / EXACT, "rel_residual": float(out["residuals"][0]),
             "residual_floor": float(out.get("residual_floors", [np.nan])[0]),
             "floor": float(out["floors"][0]), "method": out["method"], "eigen_solver": out.get("eigen_solver", ""),
-            "note": res.stability_note}
+            "note": res.stability_note, **base}
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, nargs="+", default=[1000, 10000, 100000])
     ap.add_argument("--edge-newton", action="store_true", help="Newton steps in edge coordinates")
+    ap.add_argument("--both", action="store_true", help="the rows of both solvers (node, then edge Newton)")
+    ap.add_argument("--baseline", action="store_true",
+                    help="also time the previous block Lanczos (EDGE_LANCZOS = 'baseline'), side by side")
     ap.add_argument("--repeat", type=int, default=3, help="runs per timing (the least CPU time is kept)")
     ap.add_argument("--threads", type=int, default=1, help="BLAS threads (0: leave the environment alone)")
     ap.add_argument("--load", type=float, default=P, help=f"transverse tip load, A1/L^2 (default {P:g})")
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
-    row(20, a.load, a.edge_newton, 1)   # compile
-    row(400, a.load, a.edge_newton, 1)  # compile the banded path
-    rows = [row(n, a.load, a.edge_newton, a.repeat) for n in a.n]
+    solvers = [False, True] if a.both else [a.edge_newton]
+    for edge_newton in solvers:
+        for variant in (["fused", "baseline"] if a.baseline else ["fused"]):
+            _with_lanczos(variant, lambda: row(20, a.load, edge_newton, 1))    # compile
+            _with_lanczos(variant, lambda: row(400, a.load, edge_newton, 1))   # compile the banded path
+    rows = [row(n, a.load, edge_newton, a.repeat, a.baseline) for edge_newton in solvers for n in a.n]
     if a.json:
         print(json.dumps(rows, indent=1))
         return 0
-    print(f"{'n':>7} {'iters':>5} {'solve cpu':>9} {'+stab cpu':>9} {'stab cpu':>8} {'cpu ratio':>9} {'lowest':>12} "
-          f"{'rel err':>10} {'residual':>9} {'its r-o':>8} {'floor':>9}  method")
+    bh = f" {'base cpu':>8} {'base ratio':>10}" if a.baseline else ""
+    print(f"{'solver':>6} {'n':>7} {'iters':>5} {'solve cpu':>9} {'+stab cpu':>9} {'stab cpu':>8} {'cpu ratio':>9}{bh} "
+          f"{'lowest':>12} {'rel err':>10} {'residual':>9} {'its r-o':>8} {'floor':>9}  method")
     for r in rows:
+        solver = "edge" if r["edge_newton"] else "node"
+        b = ""
+        if a.baseline:
+            ratio = f"{r['cpu_ratio_baseline']:10.2f}" if "cpu_ratio_baseline" in r else f"{'-':>10}"
+            b = f" {r['cpu_stability_baseline_s']:8.3f} {ratio}"
         if "cpu_ratio" not in r:
-            print(f"{r['n']:>7} {r['iterations']:>5} {'-':>9} {'-':>9} {r['cpu_stability_s']:8.3f} "
-                  f"{'-':>9} {r['lowest']:12.6f} {r['rel_error']:10.2e} {r['rel_residual']:9.1e} "
+            print(f"{solver:>6} {r['n']:>7} {r['iterations']:>5} {'-':>9} {'-':>9} {r['cpu_stability_s']:8.3f} "
+                  f"{'-':>9}{b} {r['lowest']:12.6f} {r['rel_error']:10.2e} {r['rel_residual']:9.1e} "
                   f"{r['residual_floor']:8.1e} {r['floor']:9.1e}  {r['method']} ({r['eigen_solver']}), "
                   f"{r['analysed']}")
-            print(f"{'':>7} the loaded solve: {r['status']}: {r['message']}")
+            print(f"{'':>14} the loaded solve: {r['status']}: {r['message']}")
             continue
-        print(f"{r['n']:>7} {r['iterations']:>5} {r['cpu_solve_s']:9.3f} {r['cpu_solve_and_stability_s']:9.3f} "
-              f"{r['cpu_stability_s']:8.3f} {r['cpu_ratio']:9.2f} {r['lowest']:12.6f} "
-              f"{r['rel_error']:10.2e} {r['rel_residual']:9.1e} {r['residual_floor']:8.1e} {r['floor']:9.1e}  "
-              f"{r['method']} ({r['eigen_solver']})")
+        print(f"{solver:>6} {r['n']:>7} {r['iterations']:>5} {r['cpu_solve_s']:9.3f} "
+              f"{r['cpu_solve_and_stability_s']:9.3f} {r['cpu_stability_s']:8.3f} {r['cpu_ratio']:9.2f}{b} "
+              f"{r['lowest']:12.6f} {r['rel_error']:10.2e} {r['rel_residual']:9.1e} {r['residual_floor']:8.1e} "
+              f"{r['floor']:9.1e}  {r['method']} ({r['eigen_solver']})")
+    if a.baseline:
+        same = all(abs(r["lowest_baseline"] - r["lowest"]) <= 1e-9 * abs(r["lowest"]) for r in rows)
+        print(f"lowest eigenvalue of the baseline within 1e-9 (relative) of the current one in every row: {same}")
     return 0
 
 

@@ -73,15 +73,19 @@ e_j = x_{j+1} - x_j and the angles. Its stiffness K_e = T^T K T (T: cumulative s
 invariance in a few terms per entry, without the cancellation of the node-coordinate entries, and checked
 (K x = T^-T K_e T^-1 x on a random vector to round-off, else node coordinates); it is banded (half-bandwidth 7
 against 10). The mass T^T M T is dense but only applied, by cumulative sums, and factored as R^T R, R = M^1/2 T:
-block Lanczos (``_edge_block_lanczos``; ARPACK if it does not converge within its basis) runs on R K_e^-1 R^T,
+block Lanczos (``_edge_block_lanczos_fused``; ARPACK if it does not converge within its basis) runs on R K_e^-1 R^T,
 shift-invert at sigma = 0 on one banded LDL^T of K_e (``linalg.band_ldlt_compact``), whose pivots count the
 negative eigenvalues exactly (Sylvester) -- the stability verdict. Two right-hand sides per pass over the factor
 (a straight rod bends alike in two planes: single-vector Lanczos, ARPACK's, needs round-off to find the second of
 each degenerate pair, and missed the second 3806.5 of the cantilever at n = 10^4, returning 14617 in its place);
-the Ritz pairs are residual-checked by the block Lanczos relation after every pass and the loop stops when the k
-wanted are all below 1e-9 (relative), 9-10 passes for k = 6 on the cantilever; the eigenvectors are the same
-combinations of the stored solves. When the analysis follows der.solve's implicit solver, the Hessian at the final
-state comes from the solver's last force evaluation (``system.take_hessian``). The eigenvalues' round-off floors
+the Ritz pairs are residual-checked by the block Lanczos relation after every pass and the loop stops when the
+lowest eigenvalue's pair is below 1e-9 (relative) and the other k - 1 below 1e-7 (their eigenvalues' errors are
+quadratic in it), 8-9 passes for k = 6 on the cantilever; the eigenvectors by k / 2 more passes on the Ritz
+vectors. Its passes over the long vectors are numba sweeps (``_edge_block_lanczos_fused``): at 10^5 the previous
+numpy products (``EDGE_LANCZOS = "baseline"``, kept for comparison; it stores every pass's solves for the
+eigenvectors) made a fresh 6 MB temporary per update, and inside der.solve fresh pages cost the baseline 0.33-0.38
+s of system time per analysis against 0.02-0.11 s. When the analysis follows der.solve's implicit solver, the
+Hessian at the final state comes from the solver's last force evaluation (``system.take_hessian``). The eigenvalues' round-off floors
 grow like eps n^2 (cantilever, lowest eigenvalue: error 8e-9 at n = 10^4, 4e-7 at 10^5, against its floor 3e-6;
 3.6e-9 at 10^5 for the loaded state solved with ``edge_newton``). Residuals
 are evaluated in node coordinates, K x as T^-T K_e z (differences), with their round-off level (eps n^3 for a
@@ -572,6 +576,240 @@ def _edge_block_lanczos(ez, L, D, k, tol=EDGE_LANCZOS_TOL, block=EDGE_LANCZOS_BL
     return None
 
 
+# The block Lanczos above, in numba sweeps over the long vectors (``_edge_block_lanczos_fused``): the same
+# recurrence, the same Gram-Schmidt (the last two blocks, then the whole basis) and Cholesky QR twice, but each pass
+# over the basis a chunked sweep that subtracts one set of coefficients and accumulates the next dot products in the
+# same read (numpy's products read the basis once per operation and make a fresh temporary of every update), and
+# the operator's scatter, cumulative sums and gather in two sweeps around the factor's solve. The previous function
+# stays as the measured baseline (``EDGE_LANCZOS = "baseline"``, tools/stability_scaling.py --baseline).
+
+EDGE_LANCZOS = "fused"      # "fused" (_edge_block_lanczos_fused) or "baseline" (_edge_block_lanczos)
+EDGE_LANCZOS_TOL_REST = 1e-7  # the fused path's relative residual for the Ritz pairs other than the lowest
+_SWEEP_CHUNK = 512          # columns per chunk of a sweep (the block's slice of W stays in the first-level cache)
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _lanczos_sweep(Q, W, sub_lo, sub_hi, hsub, dot_lo, dot_hi, hdot, gram):
+    """One chunked sweep over the columns: W[c] -= sum_{r in [sub_lo, sub_hi)} hsub[r - sub_lo, c] Q[r], then
+    hdot[r - dot_lo, c] = Q[r] . W[c] for r in [dot_lo, dot_hi) and gram[c, d] = W[c] . W[d] of the updated W
+    (hdot and gram overwritten)."""
+    b, n = W.shape
+    hdot[:, :] = 0.0
+    gram[:, :] = 0.0
+    buf = np.empty((b, _SWEEP_CHUNK))          # W's chunk (a local array: no aliasing with Q, the loops vectorise)
+    for i0 in range(0, n, _SWEEP_CHUNK):
+        i1 = min(n, i0 + _SWEEP_CHUNK)
+        w = i1 - i0
+        for c in range(b):
+            for i in range(w):
+                buf[c, i] = W[c, i0 + i]
+        for r in range(sub_lo, sub_hi):
+            q = Q[r, i0:i1]
+            for c in range(b):
+                a = hsub[r - sub_lo, c]
+                if a != 0.0:
+                    for i in range(w):
+                        buf[c, i] -= a * q[i]
+        if sub_hi > sub_lo:
+            for c in range(b):
+                for i in range(w):
+                    W[c, i0 + i] = buf[c, i]
+        for r in range(dot_lo, dot_hi):
+            q = Q[r, i0:i1]
+            for c in range(b):
+                s = 0.0
+                for i in range(w):
+                    s += q[i] * buf[c, i]
+                hdot[r - dot_lo, c] += s
+        for c in range(b):
+            for d in range(c + 1):
+                s = 0.0
+                for i in range(w):
+                    s += buf[c, i] * buf[d, i]
+                gram[c, d] += s
+    for c in range(b):
+        for d in range(c):
+            gram[d, c] = gram[c, d]
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _lanczos_scale(W, Cinv, out, gram):
+    """out <- Cinv W (Cinv lower triangular, rows; ``out`` may be ``W`` itself) and gram <- out out^T."""
+    b, n = W.shape
+    gram[:, :] = 0.0
+    buf = np.empty((b, _SWEEP_CHUNK))
+    res = np.empty((b, _SWEEP_CHUNK))
+    for i0 in range(0, n, _SWEEP_CHUNK):
+        i1 = min(n, i0 + _SWEEP_CHUNK)
+        w = i1 - i0
+        for c in range(b):
+            for i in range(w):
+                buf[c, i] = W[c, i0 + i]
+        for c in range(b):
+            for i in range(w):
+                res[c, i] = 0.0
+            for d in range(c + 1):
+                a = Cinv[c, d]
+                for i in range(w):
+                    res[c, i] += a * buf[d, i]
+        for c in range(b):
+            for i in range(w):
+                out[c, i0 + i] = res[c, i]
+            for d in range(c + 1):
+                s = 0.0
+                for i in range(w):
+                    s += res[c, i] * res[d, i]
+                gram[c, d] += s
+    for c in range(b):
+        for d in range(c):
+            gram[d, c] = gram[c, d]
+
+
+@njit(cache=True)
+def _edge_apply_block_fused(W, out, Zout, Z, L, D, slot, root, fixed_idx, tri_dep, tri_master, tri_coef, n_nodes,
+                            keep_z=True):
+    """``_edge_apply_block`` in two sweeps around the solve: ``slot`` (n_dof,) the index of each DOF among the
+    massive ones (-1: massless), ``fixed_idx`` the held slots. The scatter M^1/2 w and the suffix sums T^T in one
+    backward sweep over the nodes; the links T_L, the prefix sums T, the copy of z (``Zout``, only if ``keep_z``)
+    and the gather M^1/2 in one forward sweep."""
+    m = W.shape[0]
+    acc = np.zeros((3, m))
+    for node in range(n_nodes - 1, -1, -1):
+        for a in range(4):
+            i = 4 * node + a
+            j = slot[i]
+            if a < 3:
+                for c in range(m):
+                    if j >= 0:
+                        acc[a, c] += root[j] * W[c, j]
+                    Z[i, c] = acc[a, c]
+            else:
+                for c in range(m):
+                    Z[i, c] = root[j] * W[c, j] if j >= 0 else 0.0
+    for k in range(tri_dep.shape[0]):          # T_L^T
+        for c in range(m):
+            Z[tri_master[k], c] += tri_coef[k] * Z[tri_dep[k], c]
+    for t in range(fixed_idx.shape[0]):
+        for c in range(m):
+            Z[fixed_idx[t], c] = 0.0
+    ldlt_compact_solve_block(L, D, Z)
+    for k in range(tri_dep.shape[0]):          # T_L: the dependents from their masters
+        for c in range(m):
+            Z[tri_dep[k], c] = 0.0
+    for k in range(tri_dep.shape[0]):
+        for c in range(m):
+            Z[tri_dep[k], c] += tri_coef[k] * Z[tri_master[k], c]
+    acc[:, :] = 0.0
+    for node in range(n_nodes):
+        for a in range(4):
+            i = 4 * node + a
+            j = slot[i]
+            for c in range(m):
+                v = Z[i, c]
+                if keep_z:
+                    Zout[c, i] = v
+                if a < 3:
+                    acc[a, c] += v
+                    v = acc[a, c]
+                if j >= 0:
+                    out[c, j] = root[j] * v
+
+
+def _cholesky_inverse(G):
+    """(C^-1, C) for the lower Cholesky factor C of the small Gram matrix G, or None if Cholesky refuses it."""
+    try:
+        C = np.linalg.cholesky(G)
+    except np.linalg.LinAlgError:
+        return None
+    return np.linalg.inv(C), C
+
+
+def _edge_block_lanczos_fused(ez, L, D, k, tol=EDGE_LANCZOS_TOL, block=EDGE_LANCZOS_BLOCK,
+                              max_dim=EDGE_LANCZOS_MAX_DIM, tol_rest=None):
+    """``_edge_block_lanczos`` (the same recurrence, residual test, result and None) with its passes over the long
+    vectors as numba sweeps (``_lanczos_sweep``, ``_lanczos_scale``, ``_edge_apply_block_fused``) and a seeded
+    uniform start block. The Ritz pair of the lowest eigenvalue (the reported one) must reach ``tol``, the others
+    ``tol_rest`` (default ``EDGE_LANCZOS_TOL_REST``: their eigenvalues' errors are quadratic in it, 1e-13 relative
+    on the cantilever at 10^3-10^5, one pass of ten saved). A block whose Gram matrix Cholesky refuses
+    (numerically rank-deficient) falls back to the baseline function."""
+    if tol_rest is None:
+        tol_rest = EDGE_LANCZOS_TOL_REST
+    n_m = ez.massive.size
+    max_dim = min(max_dim, n_m - block)
+    if max_dim < k + block:
+        return None
+    slot = np.full(ez.n_dof, -1, dtype=np.int64)
+    slot[ez.massive] = np.arange(n_m)
+    args = (L, D, slot, ez.root, np.flatnonzero(ez.fixed), ez.tri_dep, ez.tri_master, ez.tri_coef, ez.N)
+    Q = np.empty((max_dim + block, n_m))
+    H = np.zeros((max_dim, max_dim))
+    W = np.empty((block, n_m))
+    scratch = np.empty((ez.n_dof, block))
+    gram = np.empty((block, block))
+    hloc = np.empty((2 * block, block))
+    hfull = np.empty((max_dim, block))
+    none = np.zeros((0, block))
+    Q[:block] = np.random.default_rng(0).random((block, n_m)) - 0.5
+    _lanczos_sweep(Q, Q[:block], 0, 0, none, 0, 0, hloc[:0], gram)
+    for _ in range(2):
+        got = _cholesky_inverse(gram)
+        if got is None:
+            return _edge_block_lanczos(ez, L, D, k, tol, block, max_dim)
+        _lanczos_scale(Q[:block], got[0], Q[:block], gram)
+    m = 0
+    passes = 0
+    while m + block <= max_dim:
+        m1 = m + block
+        _edge_apply_block_fused(Q[m:m1], W, W, scratch, *args, False)   # (the solves themselves not kept)
+        passes += 1
+        # Gram-Schmidt against the last two blocks (their dots in one sweep), then against the whole basis (its
+        # dots in the sweep that subtracts the first; its subtraction in a third, with W's Gram matrix)
+        lo = max(0, m - block)
+        hl = hloc[:m1 - lo]
+        _lanczos_sweep(Q, W, 0, 0, none, lo, m1, hl, gram)
+        hf = hfull[:m1]
+        _lanczos_sweep(Q, W, lo, m1, hl, 0, m1, hf, gram)
+        h = hf.copy()
+        h[lo:] += hl
+        _lanczos_sweep(Q, W, 0, m1, hf, 0, 0, hloc[:0], gram)
+        H[:m1, m:m1] = h
+        H[m:m1, :m1] = h.T
+        # Cholesky QR twice into the next block: W = Q_new B, B = C2^T C1^T
+        Qn = Q[m1:m1 + block]
+        got = _cholesky_inverse(gram)
+        if got is None:
+            return _edge_block_lanczos(ez, L, D, k, tol, block, max_dim)
+        _lanczos_scale(W, got[0], Qn, gram)
+        got2 = _cholesky_inverse(gram)
+        if got2 is None:
+            return _edge_block_lanczos(ez, L, D, k, tol, block, max_dim)
+        _lanczos_scale(Qn, got2[0], Qn, gram)
+        B = got2[1].T @ got[1].T
+        theta, S = np.linalg.eigh(0.5 * (H[:m1, :m1] + H[:m1, :m1].T))
+        order = np.argsort(-np.abs(theta))[:k]
+        if m1 >= k:
+            res = np.linalg.norm(B @ S[m:m1, order], axis=0) / np.maximum(np.abs(theta[order]), 1e-300)
+            lim = np.full(res.size, tol_rest)
+            with np.errstate(divide="ignore"):
+                lim[np.argmin(1.0 / theta[order])] = tol
+            if np.all(res <= lim) and np.all(theta[order] != 0.0):
+                # the eigenvectors z = K^-1 R^T y / mu of the Ritz vectors y, by ceil(k / block) more passes in the
+                # buffers already touched, rather than storing every pass's solves: at 10^5 their 64 MB of fresh
+                # pages cost 0.1-0.2 s of system time inside der.solve
+                mu = theta[order]
+                z = np.empty((k, ez.n_dof))
+                for j0 in range(0, k, block):
+                    j1 = min(k, j0 + block)
+                    y = W[:j1 - j0]
+                    np.matmul(S[:, order[j0:j1]].T, Q[:m1], out=y)
+                    sc = scratch if j1 - j0 == block else np.empty((ez.n_dof, j1 - j0))
+                    _edge_apply_block_fused(y, Q[m1:m1 + j1 - j0], z[j0:j1], sc, *args, True)
+                    z[j0:j1] /= mu[j0:j1, None]
+                return 1.0 / mu, list(z), passes
+        m = m1
+    return None
+
+
 def _edge_eigen(ez, abz_raw, k):
     """The k eigenpairs nearest zero in edge coordinates (K_e = ``abz_raw``, before the supports' links are
     condensed): one banded LDL^T of K (``band_ldlt_compact``, no
@@ -633,7 +871,8 @@ def _edge_eigen_factorised(ez, work, k):
 
         if not _test_solve_is_round_off(ez, work, solve):
             return None
-    got = _edge_block_lanczos(ez, f.L, f.D, k)
+    lanczos = _edge_block_lanczos_fused if EDGE_LANCZOS == "fused" else _edge_block_lanczos
+    got = lanczos(ez, f.L, f.D, k)
     if got is not None:
         ev, z, passes = got
         return ev, z, int(neg), f"block Lanczos, {passes} passes of {EDGE_LANCZOS_BLOCK}"
@@ -682,46 +921,69 @@ def _edge_checks(abz, kb, Zr, lam, mass, n_nodes, tri_dep, tri_master, tri_coef,
     for c in range(k):
         for i in range(n):
             full[i, c] = Zr[c, i]
-    KZ = np.zeros((n, k))
-    AZ = np.zeros((n, k))
-    for j in range(n):                          # K_e z and |K_e| |z|, the k vectors side by side
-        for i in range(max(0, j - kb), min(n - 1, j + kb) + 1):
+    KZ = np.empty((n, k))
+    AZ = np.empty((n, k))
+    s = np.empty(k)
+    sa = np.empty(k)
+    for i in range(n):                          # K_e z and |K_e| |z|, the k vectors side by side, by rows
+        for c in range(k):
+            s[c] = 0.0
+            sa[c] = 0.0
+        for j in range(max(0, i - kb), min(n - 1, i + kb) + 1):
             a = abz[off + i - j, j]
             if a == 0.0:
                 continue
             for c in range(k):
                 v = a * full[j, c]
-                KZ[i, c] += v
-                AZ[i, c] += abs(v)
-    for a in range(3):
-        for c in range(k):                      # x = T z: prefix sums
-            acc = 0.0
-            for node in range(n_nodes):
-                acc += full[4 * node + a, c]
-                full[4 * node + a, c] = acc
-        for node in range(n_nodes - 1):         # T^-T: differences
+                s[c] += v
+                sa[c] += abs(v)
+        for c in range(k):
+            KZ[i, c] = s[c]
+            AZ[i, c] = sa[c]
+    acc = np.zeros((3, k))
+    for node in range(n_nodes):                 # x = T z: prefix sums, the k vectors in one sweep
+        for a in range(3):
+            i = 4 * node + a
+            for c in range(k):
+                acc[a, c] += full[i, c]
+                full[i, c] = acc[a, c]
+    for node in range(n_nodes - 1):             # T^-T: differences
+        for a in range(3):
             for c in range(k):
                 KZ[4 * node + a, c] -= KZ[4 * (node + 1) + a, c]
-    out = np.zeros((5, k))
-    r = np.empty(n)
-    cm = np.empty(n)
+    # T_L^T on the node coordinates' free variables touches only the first p slots (the start's links): r and c
+    # there first, the links applied in their order; then one sweep over all slots
+    p = 0
+    for t in range(tri_dep.shape[0]):
+        p = max(p, tri_master[t] + 1, tri_dep[t] + 1)
+    rp = np.empty((p, k))
+    cp = np.empty((p, k))
     for c in range(k):
-        for i in range(n):
+        for i in range(p):
             mx = mass[i] * full[i, c]
-            r[i] = KZ[i, c] - lam[c] * mx
-            cm[i] = mx
+            rp[i, c] = KZ[i, c] - lam[c] * mx
+            cp[i, c] = mx
+        for t in range(tri_dep.shape[0]):
+            rp[tri_master[t], c] += tri_coef[t] * rp[tri_dep[t], c]
+            cp[tri_master[t], c] += tri_coef[t] * cp[tri_dep[t], c]
+    out = np.zeros((5, k))
+    for i in range(n):
+        for c in range(k):
+            mx = mass[i] * full[i, c]
+            if i < p:
+                ri = rp[i, c]
+                ci = cp[i, c]
+            else:
+                ri = KZ[i, c] - lam[c] * mx
+                ci = mx
             out[2, c] += AZ[i, c] * AZ[i, c]
             out[3, c] += AZ[i, c] * abs(Zr[c, i])
             out[4, c] += full[i, c] * mx
-        for t in range(tri_dep.shape[0]):       # T_L^T on the node coordinates' free variables
-            r[tri_master[t]] += tri_coef[t] * r[tri_dep[t]]
-            cm[tri_master[t]] += tri_coef[t] * cm[tri_dep[t]]
-        for i in range(n):
             if fixed[i]:
                 full[i, c] = 0.0
                 continue
-            out[0, c] += r[i] * r[i]
-            out[1, c] += cm[i] * cm[i]
+            out[0, c] += ri * ri
+            out[1, c] += ci * ci
     return out
 
 

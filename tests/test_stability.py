@@ -225,6 +225,67 @@ def test_symmetry_modes_follow_constraints_and_dead_loads():
     assert symmetry_modes(system, work) == []
 
 
+def _euler_buckled_between_clamps(rod, N=0.0, force=60.0):
+    """A rod along z clamped at both ends on the z axis (the end sliding along it, one of its clamps turned by N
+    turns about it) under an axial thrust past Euler's 4 pi^2 A1 / L^2: its buckled equilibrium."""
+    from scipy.spatial.transform import Rotation
+
+    xi = rod.rest_q.reshape(-1, 4)[:, 2] / rod.length
+    bump = np.zeros((rod.n_nodes, 3))
+    bump[2:-2, 0] = 0.1 * rod.length * np.sin(np.pi * xi[2:-2])    # the clamped edges stay on the axis
+    scene = der.Scene(rod, loads=[der.end_force([0, 0, -force])], constraints=[
+        der.clamp("start"), der.clamp("end", rotation=Rotation.from_rotvec([0, 0, 2 * np.pi * N]).as_matrix(),
+                                      slide=2)])
+    return scene, der.solve(scene, state=rod.displaced(rod.rest_state(), bump), stability=False).state
+
+
+@pytest.mark.parametrize("N", [0.0, 0.2])
+def test_rod_clamped_on_one_axis_turns_about_it_as_a_symmetry(N):
+    """Clamps at both ends on one axis leave an isotropic, naturally straight rod one exact symmetry: the whole
+    rod turned about that axis with every section turned back about its tangent (theta += t.w - 1), which leaves
+    both clamped frames in place. It used to stay in the analysis as a zero eigenvalue whose sign is round-off
+    (6e-6 and 9e-5 at n = 40, eigenpair residuals 4e-4 and 3e-2, and 'stable' by luck)."""
+    rod = der.rod_from_shape(der.shapes.straight(1.0, 40), 1.0, 1.0, EA=1e4)
+    scene, eq = _euler_buckled_between_clamps(rod, N)
+    assert np.abs(eq.positions[:, 0]).max() > 0.1          # buckled, so the turn moves the rod
+    res, modes = _null_residual(scene, eq)
+    assert len(modes) == 1 and max(res) < 1e-9
+    v = modes[0].reshape(-1, 4)
+    turn = np.cross([0, 0, 1.0], eq.positions - eq.positions[0])
+    assert np.allclose(v[:, :3] / np.abs(v[:, :3]).max(), turn / np.abs(turn).max(), atol=1e-9) or \
+        np.allclose(v[:, :3] / np.abs(v[:, :3]).max(), -turn / np.abs(turn).max(), atol=1e-9)
+    result = der.check_stability(scene, eq)
+    assert result.stable and result.eigenvalues[0] > 100.0      # the next mode, 138 A1/(rho_A L^4) at N = 0
+
+
+def test_anisotropic_rod_turns_its_sections_freely_only_while_unbent():
+    """The uniform turn of every section about its tangent is a symmetry of an anisotropic rod (A1' != A1) only
+    while it is unbent: bent, it turns the stiff axis into the bend. It used to be removed from every naturally
+    straight rod with no fixed angle."""
+    rod = der.rod_from_shape(der.shapes.straight(1.0, 20), 1.0, 1.0)
+    ribbon = rod.with_stiffness(A1prime=10.0)
+    s = np.linspace(0.0, 1.0, rod.n_nodes)
+    bent = rod.displaced(rod.rest_state(), np.column_stack([0.2 * s ** 2, np.zeros_like(s), np.zeros_like(s)]))
+    shift = np.zeros(rod.n_dof)
+    shift[4 * np.arange(rod.n_edges) + 3] = 1.0
+    # (straight, the turn about its own axis through the pin is the shift itself)
+    for r, state, has_shift, rank in ((rod, bent, True, 4), (ribbon, bent, False, 3),
+                                      (ribbon, ribbon.rest_state(), True, 3)):
+        scene = der.Scene(r, constraints=[der.pin(0)])
+        res, modes = _null_residual(scene, state)
+        V = np.array(modes).T
+        in_span = np.linalg.norm(V @ np.linalg.lstsq(V, shift, rcond=None)[0] - shift) < 1e-9 * np.linalg.norm(shift)
+        assert in_span == has_shift
+        assert _rank(modes) == rank
+        if state is not bent:                                    # an equilibrium: K annihilates every mode
+            assert max(res) < 1e-12
+    # bent, the ribbon's energy does change when its sections turn together
+    e = [sum(der.solvers.system.energy_terms(_system(der.Scene(ribbon))[0],
+                                             ribbon.displaced(bent, dtheta=c * np.ones(rod.n_edges))).values())
+         for c in (0.0, 0.3)]
+    assert abs(e[1] - e[0]) > 1e-3 * abs(e[0])
+
+
 def test_ring_sliding_mode_exists_exactly_when_the_ring_is_uniform():
     """Material sliding is a symmetry of a uniform ring with no load or constraint breaking it; a pin breaks
     it, and so does a weld that turns the natural curvature (an imposed twist not a whole number of turns on

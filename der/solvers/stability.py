@@ -33,8 +33,12 @@ from the size of an eigenvalue:
   the vertical). A dead torque tau likewise only about tau. The admissible rigid motions (u, w) are the
   null space of the linear conditions "zero on every fixed DOF" and "w x f = 0 for every dead force/torque".
 * the uniform rotation of all cross-sections about their tangents (every theta + c): a symmetry of an
-  isotropic rod with no natural curvature (kappa_bar = 0), whatever the loads (no load depends on theta),
-  when no angle is fixed. Without bending and twisting energies every angle alone is one.
+  isotropic rod with no natural curvature (kappa_bar = 0), whatever the loads (no load depends on theta).
+  It joins the rigid motions as a seventh generator, so the null space also finds its combinations with
+  them: a rod held at both ends by clamps on one axis (Euler, Greenhill) turns about that axis, every edge
+  angle by t.w - 1, leaving both clamped frames where they were (the two clamped edges lie along w, t.w = 1).
+  With no angle fixed it is the shift alone. Without bending and twisting energies every angle alone is one.
+  An anisotropic rod (A1' != A1) has it only while unbent: bent, turning its sections turns its stiff axis.
 * material sliding along the centreline of a closed ring that is uniform (equal edges, uniform natural
   curvature and twist per length, uniform stiffness; a weld with an imposed twist that is not a whole number
   of turns breaks it when there is natural curvature, whose direction it turns) with no constraint and no load that breaks it (only
@@ -244,29 +248,41 @@ def symmetry_modes(system, state):
     free_th &= ~fixed
     modes = []
     # rigid motions: null space of (values on fixed DOFs, w x f for dead loads) in (u, w)
-    Gf, col = _rigid_generator_rows(rod, state, np.flatnonzero(fixed))
+    energies = set(scene.energies)
+    straight = np.abs(rod.kappa_bar).max(initial=0.0) <= 1e-12
+    every_angle_free = "twist" not in energies and ("bend" not in energies or straight)
+    # the uniform section rotation (every theta + 1) as a seventh generator beside the rigid motions
+    # (an anisotropic rod's sections turn freely only while it is unbent: kappa = 0 whatever their orientation)
+    unbent = rod.closed is False and np.abs(np.diff(state.tangents, axis=0)).max(initial=0.0) <= 1e-12
+    shift = straight and (rod.isotropic or unbent) and not every_angle_free
+    fixed_rows = np.flatnonzero(fixed)
+    Gf, col = _rigid_generator_rows(rod, state, fixed_rows)
+    if shift:
+        Gf = np.hstack([Gf, (_edge_slots(rod)[fixed_rows]).astype(float)[:, None]])
+        col = np.append(col, np.sqrt(rod.n_edges))
     rows = [Gf / col[None, :]]
     for d in _dead_directions(scene):
         # w x d = 0, i.e. [d]x w = 0, on the rotation coefficients (columns rescaled like G's)
         cross = np.array([[0, -d[2], d[1]], [d[2], 0, -d[0]], [-d[1], d[0], 0]])
-        r = np.hstack([np.zeros((3, 3)), cross / col[None, 3:]])
+        r = np.hstack([np.zeros((3, 3)), cross / col[None, 3:6], np.zeros((3, col.size - 6))])
         rows.append(r / max(np.abs(r).max(), 1e-300))
     N = _null_space(np.vstack(rows))
     if N.shape[1]:
-        G = _rigid_generators(rod, state) / col[None, :]
+        G = _rigid_generators(rod, state)
+        if shift:
+            G = np.hstack([G, _edge_slots(rod).astype(float)[:, None]])
+        G = G / col[None, :]
         for k in range(N.shape[1]):
-            modes.append(G @ N[:, k])
-    energies = set(scene.energies)
-    straight = np.abs(rod.kappa_bar).max(initial=0.0) <= 1e-12
-    if "twist" not in energies and ("bend" not in energies or straight):
+            v = G @ N[:, k]
+            # unit columns, so a combination of norm ~0 is no motion at all: on a straight rod along its axis the
+            # turn about the axis is the shift itself, and their difference moves nothing
+            if np.linalg.norm(v) > 1e-9:
+                modes.append(v)
+    if every_angle_free:
         for d in np.flatnonzero(free_th):   # no energy depends on any angle
             v = np.zeros(rod.n_dof)
             v[d] = 1.0
             modes.append(v)
-    elif straight and not (fixed & _edge_slots(rod)).any():
-        v = np.zeros(rod.n_dof)
-        v[4 * np.arange(rod.n_edges) + 3] = 1.0
-        modes.append(v)
     if rod.closed and not fixed.any() and _ring_is_uniform(rod) \
             and all(isinstance(load, (DistributedForce, TwistingMoment)) for load in scene.loads):
         modes.append(sliding_mode(rod, state))

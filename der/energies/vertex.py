@@ -13,7 +13,9 @@ from numba import njit
 # kernels are compiled again with them.
 
 from ..geometry import edge_array
-from ..stencils import expand_vertex_hessian, scatter_band, scatter_vertex_gradient, vertex_dofs
+from ..stencils import (
+    band_positions, expand_vertex_hessian, scatter_band, scatter_band_at, scatter_vertex_gradient, vertex_dofs,
+)
 from .bend import _bend_local
 from .stiffness import bending_at, twisting_at
 from .stretch import _stretch_local
@@ -96,6 +98,7 @@ def _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_
     H6 = np.empty((6, 6))
     work = np.empty((5, 8))
     dofs = np.empty(11, dtype=np.int64)
+    pos = np.empty(11, dtype=np.int64)
     d6 = np.empty(6, dtype=np.int64)
     owner = np.full(n_edges, -1, dtype=np.int64)   # the vertex that carries edge j's stretching
     side = np.zeros(n_edges, dtype=np.int64)       # 0: it is that vertex's edge before, 1: after
@@ -171,7 +174,8 @@ def _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_
                         H11[m[r], m[t]] += H6[r, t]
         if order >= 2:
             vertex_dofs(vertex_nodes, vertex_edges, v, dofs)
-            scatter_band(ab, kl, ku, perm, dofs, H11, 1.0)
+            contiguous = band_positions(perm, dofs, pos)
+            scatter_band_at(ab, kl, ku, pos, contiguous, H11)
     for j in range(n_edges):   # edges on no vertex (a single-edge rod)
         if owner[j] < 0:
             e_stretch += _stretch_local(Ee, j, l_bar[j], k_stretch[j], lam[j], order, g6, H6)

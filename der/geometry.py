@@ -371,7 +371,6 @@ def add_transport_jacobian(q, edge_nodes, dE_dtheta, ab, kl, ku, perm, E=None):
     where the theta equations balance without external twisting moments, and is what makes a follower
     twisting moment a circulatory load.
     """
-    off = kl + ku
     for j in range(edge_nodes.shape[0]):
         g = dE_dtheta[j]
         if g == 0.0:
@@ -386,13 +385,20 @@ def add_transport_jacobian(q, edge_nodes, dE_dtheta, ab, kl, ku, perm, E=None):
             e0 = E[j, 0]
             e1 = E[j, 1]
             e2 = E[j, 2]
-        le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-        c = 0.5 * g / (le * le * le)   # [t]_x / |e|^2 = [e]_x / |e|^3
-        # the 3x3 block C = c [e]_x, with signs (+, -, -, +) on (a, a), (a, b), (b, a), (b, b): its 6 non-zeros
-        # written straight into the band (issue 17: the dense 6 x 6 scatter through the permutation, zero diagonals
-        # included, cost as much as the assembly's own scatter; bitwise the same band up to the sign of a zero)
-        _transport_entries(ab, off, perm[a], perm[a + 1], perm[a + 2], perm[b], perm[b + 1], perm[b + 2],
-                           (0.0, -c * e2, c * e1, c * e2, 0.0, -c * e0, -c * e1, c * e0, 0.0))
+        transport_jacobian_edge(ab, kl + ku, perm, a, b, g, e0, e1, e2)
+
+
+@njit(cache=True, inline="always")
+def transport_jacobian_edge(ab, off, perm, a, b, g, e0, e1, e2):
+    """``add_transport_jacobian`` of one edge (its first DOFs ``a``, ``b``, its vector ``e``, its twisting moment
+    ``g``): the 3x3 block C = c [e]_x, c = g / (2 |e|^3), with signs (+, -, -, +) on (a, a), (a, b), (b, a), (b, b),
+    its 6 non-zeros written straight into the band (issue 17: the dense 6 x 6 scatter through the permutation, zero
+    diagonals included, cost as much as the assembly's own scatter; bitwise the same band up to the sign of a zero).
+    The assembly of all three terms adds it inside its vertex pass (``energies.vertex``)."""
+    le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    c = 0.5 * g / (le * le * le)   # [t]_x / |e|^2 = [e]_x / |e|^3
+    _transport_entries(ab, off, perm[a], perm[a + 1], perm[a + 2], perm[b], perm[b + 1], perm[b + 2],
+                       (0.0, -c * e2, c * e1, c * e2, 0.0, -c * e0, -c * e1, c * e0, 0.0))
 
 
 @njit(cache=True, inline="always")
@@ -403,14 +409,12 @@ def _transport_entries(ab, off, pa0, pa1, pa2, pb0, pb1, pb2, C):
     pb = (pb0, pb1, pb2)
     for s in range(3):
         ja = pa[s]
-        jb = pb[s]
         for r in range(3):
             if r != s:
                 h = C[3 * r + s]
                 ab[np.uint64(off + pa[r] - ja), np.uint64(ja)] += h
                 ab[np.uint64(off + pb[r] - ja), np.uint64(ja)] += -h
     for s in range(3):
-        ja = pa[s]
         jb = pb[s]
         for r in range(3):
             if r != s:

@@ -355,3 +355,30 @@ def scatter_band_at(ab, kl, ku, pos, contiguous, H):
         r0 = off - j
         for a in range(m):
             ab[np.uint64(r0 + pos[a]), col] += H[a, b]
+
+
+@njit(cache=True)
+def scatter_band_symmetric_at(ab, kl, ku, pos, contiguous, H):
+    """Add the symmetric matrix whose upper triangle is ``H[a, b]`` (a <= b; the rest of H is not read) at the
+    banded positions ``pos`` (``band_positions``): each off-diagonal entry into both triangles of the band."""
+    m = pos.shape[0]
+    off = kl + ku
+    if contiguous:
+        base = pos[0]
+        for b in range(m):
+            jb = np.uint64(base + b)
+            for a in range(b):
+                h = H[a, b]
+                ab[np.uint64(off + a - b), jb] += h
+                ab[np.uint64(off + b - a), np.uint64(base + a)] += h
+            ab[np.uint64(off), jb] += H[b, b]
+        return
+    for b in range(m):
+        pb = pos[b]
+        jb = np.uint64(pb)
+        for a in range(b):
+            pa = pos[a]
+            h = H[a, b]
+            ab[np.uint64(off + pa - pb), jb] += h
+            ab[np.uint64(off + pb - pa), np.uint64(pa)] += h
+        ab[np.uint64(off), jb] += H[b, b]

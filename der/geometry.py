@@ -15,7 +15,7 @@ All angles are in radians, right-handed.
 import numpy as np
 from numba import njit
 
-from .stencils import edge_dofs, scatter_band, two_sum, vangle, vcross, vdot, vec, vnorm, vscale, vsub, vtransport
+from .stencils import two_sum, vangle, vcross, vdot, vec, vnorm, vscale, vsub, vtransport
 
 # ---------------------------------------------------------------------------------------------
 # small vector helpers (3-vectors as length-3 arrays)

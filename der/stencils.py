@@ -334,30 +334,6 @@ def band_positions(perm, dofs, out):
 
 
 @njit(cache=True)
-def scatter_band_at(ab, kl, ku, pos, contiguous, H):
-    """``scatter_band`` (scale 1) with the banded positions of the stencil's DOFs given (``band_positions``): for a
-    stencil that is not a dense block (a folded ring's: three runs of consecutive positions) the positions are
-    looked up once per stencil instead of once per entry through ``perm[dofs[a]]`` (issue 17: the ring's scatter
-    cost 4x the open rod's at 10^5 edges). Bitwise the same band (the same additions, column by column)."""
-    m = pos.shape[0]
-    off = kl + ku
-    if contiguous:
-        base = pos[0]
-        for b in range(m):
-            r0 = off - b
-            j = np.uint64(base + b)
-            for a in range(m):
-                ab[np.uint64(r0 + a), j] += H[a, b]
-        return
-    for b in range(m):
-        j = pos[b]
-        col = np.uint64(j)
-        r0 = off - j
-        for a in range(m):
-            ab[np.uint64(r0 + pos[a]), col] += H[a, b]
-
-
-@njit(cache=True)
 def scatter_band_symmetric_at(ab, kl, ku, pos, contiguous, H):
     """Add the symmetric matrix whose upper triangle is ``H[a, b]`` (a <= b; the rest of H is not read) at the
     banded positions ``pos`` (``band_positions``): each off-diagonal entry into both triangles of the band."""

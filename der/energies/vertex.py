@@ -5,6 +5,13 @@ scattered halves the scattering into the band (issue 17). ``stretch_bend_twist_h
 stretching of each edge into the stencil of one vertex on it (its 6 DOFs are among the 11), which saves the
 edges' own scatter. The math is that of ``energies.bend`` and ``energies.twist``; ``bend_hessian`` followed by
 ``twist_hessian`` gives the same matrix to round-off (the local sums are added in another order).
+
+The pass of all three terms (the solver's, issue 17) forms the bending and twisting of a vertex in one local
+kernel (``_bend_twist_local``: the frames, curvatures and binormal formed once, the gradient bitwise that of the
+order-1 pass, the Hessian as its 36 upper entries with every term summed per entry), maps them to the stencil's 66
+upper entries and writes each into both triangles of the band; it zeroes each band column just before its first
+entry and adds each edge's frame-transport term after the last vertex on it, so the band is read and written once
+(measured: ``tools/bench_kernels.py``, README "At scale").
 """
 import numpy as np
 from numba import njit
@@ -62,10 +69,10 @@ def stretch_bend_twist_hessian(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_
     stencil of the first vertex that holds it (its edge after, else before), and with ``transport`` the
     frame-transport term of every edge (``geometry.add_transport_jacobian``; its twisting moment read from
     ``grad``, which must come in zeroed), added after the last vertex on the edge. ``ab`` need not come zeroed:
-    each column is zeroed just before its first entry. The local Hessians are formed as their upper triangles and written
-    into both triangles of the band (``_bend_twist_local``): the energy part is exactly symmetric.
-    Returns ``(stretch, bending, twisting)`` energies. ``E``: the edge vectors (``geometry.edge_array``; formed
-    from ``q`` if None)."""
+    each column is zeroed just before its first entry. The local Hessians are formed as their upper triangles and
+    written into both triangles of the band (``_bend_twist_local``): the energy part is exactly symmetric. Returns
+    ``(stretch, bending, twisting)`` energies. ``E``: the edge vectors (``geometry.edge_array``; formed from ``q``
+    if None)."""
     return _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_stretch, lam, reference_twist,
                                weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, kl, ku, perm, E, 2,
                                np.empty((0, 3)), np.empty(0), transport)

@@ -44,7 +44,6 @@ from der.energies.stretch import _stretch_local  # noqa: E402
 from der.energies.twist import _twist_local  # noqa: E402
 from der.geometry import add_transport_jacobian, edge_array, edge_array_into, edge_frames  # noqa: E402
 from der.energies.stiffness import bending_at, twisting_at  # noqa: E402
-from der.energies.vertex import _EDGE_IN_STENCIL  # noqa: E402
 from der.linalg import zero_band  # noqa: E402
 from der.stencils import edge_dofs, expand_vertex_hessian, scatter_vertex_gradient, vertex_dofs  # noqa: E402
 
@@ -114,6 +113,10 @@ def legacy_hessian(plan, q, d1, reference_twist, lam, grad, ab, kl, ku, perm):
 # one pass over the local array) expanded to the full 11 x 11 and scattered entry by entry, the frame-transport
 # term in a pass of its own as a dense 6 x 6 block through the permutation. Same local kernels as der's.
 # ---------------------------------------------------------------------------------------------
+
+
+# positions of an edge's 6 DOFs [x_a (3), x_b (3)] in the vertex stencil [x0, theta_e, x1, theta_f, x2]
+_EDGE_IN_STENCIL = ((0, 1, 2, 4, 5, 6), (4, 5, 6, 8, 9, 10))
 
 
 @njit(cache=True)

@@ -22,6 +22,7 @@ from numba import njit
 from ..geometry import edge_array, transport_jacobian_edge
 from ..linalg import zero_band_column
 from ..stencils import (
+    elongation,
     band_positions, curvature_binormal_of, edge_vectors, expand_vertex_hessian, scatter_band,
     scatter_band_symmetric_at, scatter_vertex_gradient, vadd, vcross, vdot, vertex_dofs, vscale, vsub,
 )
@@ -55,10 +56,6 @@ def bend_twist_hessian(q, ed, vertex_nodes, vertex_edges, reference_twist, weld,
         vertex_dofs(vertex_nodes, vertex_edges, v, dofs)
         scatter_band(ab, kl, ku, perm, dofs, H11, 1.0)
     return e_bend, e_twist
-
-
-# positions of an edge's 6 DOFs [x_a (3), x_b (3)] in the vertex stencil [x0, theta_e, x1, theta_f, x2]
-_EDGE_IN_STENCIL = ((0, 1, 2, 4, 5, 6), (4, 5, 6, 8, 9, 10))
 
 
 @njit(cache=True)
@@ -192,6 +189,9 @@ def _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_
                 e_stretch += e6s[s]
                 for i in range(6):
                     g6[i] = g6s[s, i]
+            elif order >= 2:
+                # its Hessian's upper triangle straight onto that of H11 (edge before: x0, x1; after: x1, x2)
+                e_stretch += _stretch_local_upper(Ee, j, l_bar[j], k_stretch[j], lam[j], g6, H11, 4 * s)
             else:
                 e_stretch += _stretch_local(Ee, j, l_bar[j], k_stretch[j], lam[j], order, g6, H6)
             a = 4 * edge_nodes[j, 0]
@@ -199,20 +199,14 @@ def _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_
             for i in range(3):
                 grad[a + i] += g6[i]
                 grad[c + i] += g6[3 + i]
-            if order >= 2:
-                m = _EDGE_IN_STENCIL[s]      # increasing: the upper triangle of H6 onto that of H11
-                for r in range(6):
-                    for t in range(r, 6):
-                        H11[m[r], m[t]] += H6[r, t]
         if order >= 2:
             vertex_dofs(vertex_nodes, vertex_edges, v, dofs)
             contiguous = band_positions(perm, dofs, pos)
-            if order >= 2:
-                for a in range(11):
-                    p = pos[a]
-                    if not zeroed[p]:
-                        zero_band_column(ab, p)
-                        zeroed[p] = True
+            for a in range(11):
+                p = pos[a]
+                if not zeroed[p]:
+                    zero_band_column(ab, p)
+                    zeroed[p] = True
             scatter_band_symmetric_at(ab, kl, ku, pos, contiguous, H11)
             for s in range(2):
                 j = vertex_edges[v, s]
@@ -389,6 +383,34 @@ def _bend_twist_local(q, ed, vertex_edges, reference_twist, weld, v, kappa_bar, 
         H[i, 7] += ile * (c2 * tfVf[i] - Pf * tt[i])
         H[3 + i, 7] += ilf * (-Pf * tt[i] - c2 * teVf[i])
     return e_bend, e_twist
+
+
+@njit(cache=True, inline="always")
+def _stretch_local_upper(E, j, l_bar, k, lam, g6, H11, o):
+    """``energies.stretch._stretch_local`` at order 2 with its 6 x 6 Hessian's upper triangle added straight into
+    H11 at stencil positions (o, o+1, o+2, o+4, o+5, o+6): the same operations, so the energy, ``g6`` and every
+    entry added are bitwise those of ``_stretch_local``."""
+    e0 = E[j, 0]
+    e1 = E[j, 1]
+    e2 = E[j, 2]
+    g, le = elongation(E, j, l_bar)
+    energy = lam * g + 0.5 * k * g * g
+    tension = lam + k * g
+    t = (e0 / le, e1 / le, e2 / le)
+    for i in range(3):
+        g6[i] = -tension * t[i]
+        g6[3 + i] = tension * t[i]
+    c = tension / le
+    for i in range(3):
+        for jj in range(3):
+            h = (k - c) * t[i] * t[jj]
+            if i == jj:
+                h += c
+            if i <= jj:
+                H11[o + i, o + jj] += h             # x_a x_a
+                H11[o + 4 + i, o + 4 + jj] += h     # x_b x_b
+            H11[o + i, o + 4 + jj] += -h            # x_a x_b
+    return energy
 
 
 @njit(cache=True, inline="always")

@@ -15,7 +15,7 @@ All angles are in radians, right-handed.
 import numpy as np
 from numba import njit
 
-from .stencils import edge_dofs, scatter_band, two_sum, vangle, vcross, vdot, vec, vnorm, vscale, vsub, vtransport
+from .stencils import two_sum, vangle, vcross, vdot, vec, vnorm, vscale, vsub, vtransport
 
 # ---------------------------------------------------------------------------------------------
 # small vector helpers (3-vectors as length-3 arrays)
@@ -371,15 +371,13 @@ def add_transport_jacobian(q, edge_nodes, dE_dtheta, ab, kl, ku, perm, E=None):
     where the theta equations balance without external twisting moments, and is what makes a follower
     twisting moment a circulatory load.
     """
-    dofs = np.empty(6, dtype=np.int64)
-    B = np.zeros((6, 6))
     for j in range(edge_nodes.shape[0]):
         g = dE_dtheta[j]
         if g == 0.0:
             continue
+        a = 4 * edge_nodes[j, 0]
+        b = 4 * edge_nodes[j, 1]
         if E is None:
-            a = 4 * edge_nodes[j, 0]
-            b = 4 * edge_nodes[j, 1]
             e0 = q[b] - q[a]
             e1 = q[b + 1] - q[a + 1]
             e2 = q[b + 2] - q[a + 2]
@@ -387,22 +385,42 @@ def add_transport_jacobian(q, edge_nodes, dE_dtheta, ab, kl, ku, perm, E=None):
             e0 = E[j, 0]
             e1 = E[j, 1]
             e2 = E[j, 2]
-        le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-        c = 0.5 * g / (le * le * le)   # [t]_x / |e|^2 = [e]_x / |e|^3
-        # the 3x3 block c [e]_x, repeated with signs (+, -, -, +) on (a, a), (a, b), (b, a), (b, b)
-        B[0, 1] = -c * e2
-        B[0, 2] = c * e1
-        B[1, 0] = c * e2
-        B[1, 2] = -c * e0
-        B[2, 0] = -c * e1
-        B[2, 1] = c * e0
+        transport_jacobian_edge(ab, kl + ku, perm, a, b, g, e0, e1, e2)
+
+
+@njit(cache=True, inline="always")
+def transport_jacobian_edge(ab, off, perm, a, b, g, e0, e1, e2):
+    """``add_transport_jacobian`` of one edge (its first DOFs ``a``, ``b``, its vector ``e``, its twisting moment
+    ``g``): the 3x3 block C = c [e]_x, c = g / (2 |e|^3), with signs (+, -, -, +) on (a, a), (a, b), (b, a), (b, b),
+    its 6 non-zeros written straight into the band (issue 17: the dense 6 x 6 scatter through the permutation, zero
+    diagonals included, cost as much as the assembly's own scatter; bitwise the same band up to the sign of a zero).
+    The assembly of all three terms adds it inside its vertex pass (``energies.vertex``)."""
+    le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    c = 0.5 * g / (le * le * le)   # [t]_x / |e|^2 = [e]_x / |e|^3
+    _transport_entries(ab, off, perm[a], perm[a + 1], perm[a + 2], perm[b], perm[b + 1], perm[b + 2],
+                       (0.0, -c * e2, c * e1, c * e2, 0.0, -c * e0, -c * e1, c * e0, 0.0))
+
+
+@njit(cache=True, inline="always")
+def _transport_entries(ab, off, pa0, pa1, pa2, pb0, pb1, pb2, C):
+    """ab += [[C, -C], [-C, C]] at band positions (pa0, pa1, pa2, pb0, pb1, pb2), C's off-diagonal entries only
+    (C = c [e]_x, row-major 9-tuple), column by column in the order of the dense scatter."""
+    pa = (pa0, pa1, pa2)
+    pb = (pb0, pb1, pb2)
+    for s in range(3):
+        ja = pa[s]
         for r in range(3):
-            for s in range(3):
-                B[3 + r, 3 + s] = B[r, s]
-                B[r, 3 + s] = -B[r, s]
-                B[3 + r, s] = -B[r, s]
-        edge_dofs(edge_nodes, j, dofs)
-        scatter_band(ab, kl, ku, perm, dofs, B, 1.0)
+            if r != s:
+                h = C[3 * r + s]
+                ab[np.uint64(off + pa[r] - ja), np.uint64(ja)] += h
+                ab[np.uint64(off + pb[r] - ja), np.uint64(ja)] += -h
+    for s in range(3):
+        jb = pb[s]
+        for r in range(3):
+            if r != s:
+                h = C[3 * r + s]
+                ab[np.uint64(off + pa[r] - jb), np.uint64(jb)] += -h
+                ab[np.uint64(off + pb[r] - jb), np.uint64(jb)] += h
 
 
 @njit(cache=True)

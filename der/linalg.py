@@ -102,6 +102,13 @@ def zero_band(ab):
             ab[i, j] = 0.0
 
 
+@njit(cache=True, inline="always")
+def zero_band_column(ab, j):
+    """ab[:, j] <- 0 (contiguous in Fortran order)."""
+    for i in range(ab.shape[0]):
+        ab[i, j] = 0.0
+
+
 @njit(cache=True)
 def constrain_band(ab, kl, ku, perm, fixed, diag):
     """Replace rows and columns of fixed DOFs by identity (times ``diag``), keeping the band."""

@@ -296,13 +296,14 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
     E = edge_array_into(q, plan.edge_nodes, q_lo, True, plan.work_E)   # with their low parts (curvature, elongation)
     grad[:] = 0.0
     fext[:] = 0.0
-    if order >= 2:
-        zero_band(ab)
     energy = 0.0
     # all three terms: one pass over the vertex stencils, each edge's stretching inside one of them; at order 1 the
     # same pass without the band, so that the forces are bitwise the same with and without the Jacobian (a solver
-    # evaluates its residual first and assembles the band only for a step, issue 17)
+    # evaluates its residual first and assembles the band only for a step, issue 17). At order 2 that pass zeroes
+    # each column of the band just before its first entry and adds the frame-transport term
     full = order >= 1 and plan.has_stretch and plan.has_bend and plan.has_twist
+    if order >= 2 and not full:
+        zero_band(ab)
     if plan.has_stretch and not full:
         plan.counters[0] += 1
         if order >= 2:
@@ -366,6 +367,7 @@ def evaluate(plan, q, d1, reference_twist, lam, order, grad, fext, ab, kl, ku, p
                                    plan.A2)
     if order >= 2 and (plan.has_bend or plan.has_twist):
         plan.counters[3] += 1
+    if order >= 2 and (plan.has_bend or plan.has_twist) and not full:   # (``full``: added in its pass)
         n_edges = plan.edge_nodes.shape[0]
         dE_dtheta = plan.work_dE
         for j in range(n_edges):

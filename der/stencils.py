@@ -318,3 +318,43 @@ def scatter_band(ab, kl, ku, perm, dofs, H, scale):
         for a in range(m):
             i = perm[dofs[a]]
             ab[np.uint64(off + i - j), col] += scale * H[a, b]
+
+
+@njit(cache=True)
+def band_positions(perm, dofs, out):
+    """out[a] <- perm[dofs[a]], the banded positions of a stencil's DOFs; returns True when they are consecutive
+    (``out[a] = out[0] + a``: an open rod's stencil, a dense block of the band)."""
+    m = dofs.shape[0]
+    contiguous = True
+    for a in range(m):
+        out[a] = perm[dofs[a]]
+        if out[a] != out[0] + a:
+            contiguous = False
+    return contiguous
+
+
+@njit(cache=True)
+def scatter_band_symmetric_at(ab, kl, ku, pos, contiguous, H):
+    """Add the symmetric matrix whose upper triangle is ``H[a, b]`` (a <= b; the rest of H is not read) at the
+    banded positions ``pos`` (``band_positions``): each off-diagonal entry into both triangles of the band."""
+    m = pos.shape[0]
+    off = kl + ku
+    if contiguous:
+        base = pos[0]
+        for b in range(m):
+            jb = np.uint64(base + b)
+            for a in range(b):
+                h = H[a, b]
+                ab[np.uint64(off + a - b), jb] += h
+                ab[np.uint64(off + b - a), np.uint64(base + a)] += h
+            ab[np.uint64(off), jb] += H[b, b]
+        return
+    for b in range(m):
+        pb = pos[b]
+        jb = np.uint64(pb)
+        for a in range(b):
+            pa = pos[a]
+            h = H[a, b]
+            ab[np.uint64(off + pa - pb), jb] += h
+            ab[np.uint64(off + pb - pa), np.uint64(pa)] += h
+        ab[np.uint64(off), jb] += H[b, b]

@@ -41,15 +41,20 @@ def _transport_term(rod, state, g):
     return band_to_sparse(ab, kl, ku, perm).toarray()
 
 
+def _energies(term):
+    """A scene's energies: one term, or "all" three (the assembly's fused vertex pass, ``energies.vertex``)."""
+    return tuple(TERMS) if term == "all" else (term,)
+
+
 @pytest.mark.parametrize("shape", SHAPES)
-@pytest.mark.parametrize("term", TERMS)
+@pytest.mark.parametrize("term", TERMS + ["all"])
 def test_hessian_matches_second_differences_of_energy(shape, term):
     """The symmetric energy Hessian: u^T H v against 5-point second differences of E along straight rays."""
     rng = np.random.default_rng(1 + hash((shape, term)) % 2 ** 32)
     rod = der.rod_from_shape(SHAPES[shape], 1.3, 0.7, EA=40.0)
     state = perturbed_state(rod, rng)
     state.lam = 0.3 * rng.standard_normal(rod.n_edges)
-    ev = Evaluator(der.Scene(rod, energies=(term,)))
+    ev = Evaluator(der.Scene(rod, energies=_energies(term)))
     _, g, _, K = ev(state, 2)
     H = K - _transport_term(rod, state, g)
     free = free_mask(rod)
@@ -68,13 +73,14 @@ def test_hessian_matches_second_differences_of_energy(shape, term):
 
 
 @pytest.mark.parametrize("shape", SHAPES)
-@pytest.mark.parametrize("term", ["bend", "twist"])
+@pytest.mark.parametrize("term", ["bend", "twist", "all"])
 def test_force_jacobian_matches_differences_of_transported_gradient(shape, term):
-    """K = d(gradient)/dq with frames parallel-transported along the step: Hessian + frame-transport term."""
+    """K = d(gradient)/dq with frames parallel-transported along the step: Hessian + frame-transport term ("all":
+    the three terms in one vertex pass, the transport term added inside it)."""
     rng = np.random.default_rng(2 + hash((shape, term)) % 2 ** 32)
     rod = der.rod_from_shape(SHAPES[shape], 1.3, 0.7)
     state = perturbed_state(rod, rng)
-    ev = Evaluator(der.Scene(rod, energies=(term,)))
+    ev = Evaluator(der.Scene(rod, energies=_energies(term)))
     _, g, _, K = ev(state, 2)
     free = np.flatnonzero(free_mask(rod))
     h = 1e-6

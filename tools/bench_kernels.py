@@ -1,6 +1,6 @@
 """Throughput of the energy kernels: numba against a plain vectorised NumPy implementation, side by side.
 
-    python tools/bench_kernels.py [--json] [--repeat 7] [--n 100 1000 10000]
+    python tools/bench_kernels.py [--json] [--repeat 7] [--n 100 1000 10000] [--closed]
 
 For each n (edges) it times one full gradient evaluation (stretch + bend + twist) and one gradient + Hessian
 evaluation (banded), with der's numba kernels and with the NumPy version written below (same formulas,
@@ -14,7 +14,11 @@ Side by side in the same run (issue 17): the gradient + band Hessian assembly ag
 ``grad_separate_s`` the three separate passes it replaced), the assembly as it was before issue 17
 (``hess_legacy_s``, kept below as the baseline: row-by-row scattering, bending and twisting scattered in two
 passes) and one LAPACK ``dgbsv`` on the same band (``dgbsv_s``), the floor of a Newton iteration, beside der's
-``band_solve`` (``ldlt_solve_s``: symmetric LDL^T refined against the band and checked, else dgbsv).
+``band_solve`` (``ldlt_solve_s``: symmetric LDL^T refined against the band and checked, else dgbsv). And the
+assembly as it was at c7e7f53 (``hess_before_s``, kept below: full 8 x 8 local Hessians expanded to 11 x 11 and
+scattered entry by entry, the band zeroed and the frame-transport term added in passes of their own), timed in
+alternation with der's and the gradient (``hess_before_over_grad``, ``before_over_new``); its band equals der's to
+``max_rel_diff_before`` (<= 1e-14, checked) and its gradient bitwise.
 """
 import argparse
 import json
@@ -38,7 +42,9 @@ from der.energies.stretch import stretch_gradient  # noqa: E402
 from der.energies.twist import twist_gradient  # noqa: E402
 from der.energies.stretch import _stretch_local  # noqa: E402
 from der.energies.twist import _twist_local  # noqa: E402
-from der.geometry import add_transport_jacobian, edge_array, edge_frames  # noqa: E402
+from der.geometry import add_transport_jacobian, edge_array, edge_array_into, edge_frames  # noqa: E402
+from der.energies.stiffness import bending_at, twisting_at  # noqa: E402
+from der.linalg import zero_band  # noqa: E402
 from der.stencils import edge_dofs, expand_vertex_hessian, scatter_vertex_gradient, vertex_dofs  # noqa: E402
 
 # ---------------------------------------------------------------------------------------------
@@ -98,6 +104,122 @@ def legacy_hessian(plan, q, d1, reference_twist, lam, grad, ab, kl, ku, perm):
     for j in range(n_edges):
         dE_dtheta[j] = grad[4 * j + 3]
     add_transport_jacobian(q, plan.edge_nodes, dE_dtheta, ab, kl, ku, perm)
+    return energy
+
+
+# ---------------------------------------------------------------------------------------------
+# the assembly as it was at c7e7f53, before this round of issue 17 (the baseline of the "hess_before" column): the
+# band zeroed in a pass of its own, per vertex the full 8 x 8 local Hessians of bending and twisting (each term
+# one pass over the local array) expanded to the full 11 x 11 and scattered entry by entry, the frame-transport
+# term in a pass of its own as a dense 6 x 6 block through the permutation. Same local kernels as der's.
+# ---------------------------------------------------------------------------------------------
+
+
+# positions of an edge's 6 DOFs [x_a (3), x_b (3)] in the vertex stencil [x0, theta_e, x1, theta_f, x2]
+_EDGE_IN_STENCIL = ((0, 1, 2, 4, 5, 6), (4, 5, 6, 8, 9, 10))
+
+
+@njit(cache=True)
+def _scatter_band_before(ab, kl, ku, perm, dofs, H):
+    """stencils.scatter_band at c7e7f53 (scale 1): column by column, positions looked up per entry."""
+    m = dofs.shape[0]
+    off = kl + ku
+    base = perm[dofs[0]]
+    contiguous = True
+    for a in range(1, m):
+        if perm[dofs[a]] != base + a:
+            contiguous = False
+            break
+    if contiguous:
+        for b in range(m):
+            r0 = off - b
+            j = np.uint64(base + b)
+            for a in range(m):
+                ab[np.uint64(r0 + a), j] += H[a, b]
+        return
+    for b in range(m):
+        j = perm[dofs[b]]
+        col = np.uint64(j)
+        for a in range(m):
+            i = perm[dofs[a]]
+            ab[np.uint64(off + i - j), col] += H[a, b]
+
+
+@njit(cache=True)
+def before_hessian(plan, q, d1, reference_twist, lam, grad, ab, kl, ku, perm):
+    """scene.evaluate at order 2 of a rod with all three terms, as at c7e7f53."""
+    E = edge_array_into(q, plan.edge_nodes, None, True, plan.work_E)
+    grad[:] = 0.0
+    zero_band(ab)
+    ed = edge_frames(q, plan.edge_nodes, d1, E, plan.work_ed)
+    edge_nodes, vertex_nodes, vertex_edges = plan.edge_nodes, plan.vertex_nodes, plan.vertex_edges
+    n_edges = edge_nodes.shape[0]
+    g8 = np.empty(8)
+    H8 = np.empty((8, 8))
+    H11 = np.empty((11, 11))
+    g6 = np.empty(6)
+    H6 = np.empty((6, 6))
+    work = np.empty((5, 8))
+    dofs = np.empty(11, dtype=np.int64)
+    owner = np.full(n_edges, -1, dtype=np.int64)
+    side = np.zeros(n_edges, dtype=np.int64)
+    for v in range(vertex_edges.shape[0]):
+        for s in (1, 0):
+            j = vertex_edges[v, s]
+            if owner[j] < 0:
+                owner[j] = v
+                side[j] = s
+    energy = 0.0
+    for v in range(vertex_edges.shape[0]):
+        a1, a2 = bending_at(plan.A1, v)
+        energy += _bend_local(ed, vertex_edges, plan.weld, v, plan.kappa_bar, a1 / plan.voronoi[v],
+                              a2 / plan.voronoi[v], 2, g8, H8, work)
+        energy += _twist_local(q, ed, vertex_edges, reference_twist, plan.weld, v, plan.twist_bar[v],
+                               twisting_at(plan.A2, v) / plan.voronoi[v], 2, g8, H8, work, True)
+        scatter_vertex_gradient(grad, vertex_nodes[v, 0], vertex_nodes[v, 1], vertex_nodes[v, 2],
+                                vertex_edges[v, 0], vertex_edges[v, 1], g8)
+        expand_vertex_hessian(H8, H11)
+        for s in range(2):
+            j = vertex_edges[v, s]
+            if owner[j] != v or side[j] != s:
+                continue
+            energy += _stretch_local(E, j, plan.l_bar[j], plan.k_stretch[j], lam[j], 2, g6, H6)
+            a = 4 * edge_nodes[j, 0]
+            c = 4 * edge_nodes[j, 1]
+            for i in range(3):
+                grad[a + i] += g6[i]
+                grad[c + i] += g6[3 + i]
+            m = _EDGE_IN_STENCIL[s]
+            for r in range(6):
+                for t in range(6):
+                    H11[m[r], m[t]] += H6[r, t]
+        vertex_dofs(vertex_nodes, vertex_edges, v, dofs)
+        _scatter_band_before(ab, kl, ku, perm, dofs, H11)
+    # the frame-transport term, a pass of its own (geometry.add_transport_jacobian at c7e7f53)
+    d6 = np.empty(6, dtype=np.int64)
+    B = np.zeros((6, 6))
+    for j in range(n_edges):
+        g = grad[4 * j + 3]
+        if g == 0.0:
+            continue
+        e0 = E[j, 0]
+        e1 = E[j, 1]
+        e2 = E[j, 2]
+        le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        c = 0.5 * g / (le * le * le)
+        B[0, 1] = -c * e2
+        B[0, 2] = c * e1
+        B[1, 0] = c * e2
+        B[1, 2] = -c * e0
+        B[2, 0] = -c * e1
+        B[2, 1] = c * e0
+        for r in range(3):
+            for s in range(3):
+                B[3 + r, 3 + s] = B[r, s]
+                B[r, 3 + s] = -B[r, s]
+                B[3 + r, s] = -B[r, s]
+        edge_dofs(edge_nodes, j, d6)
+        _scatter_band_before(ab, kl, ku, perm, d6, B)
     return energy
 
 
@@ -260,12 +382,27 @@ def timed(fn, repeat):
     return float(np.min(times))
 
 
-def setup(n, rng):
-    rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, max(1.0, n / 100), n), 1.0, 1.5)
+def timed_alternating(fns, repeat):
+    """``timed`` of each of ``fns``, their calls alternating: best CPU seconds of each."""
+    times = [[] for _ in fns]
+    for _ in range(repeat):
+        for k, fn in enumerate(fns):
+            t0 = time.process_time()
+            fn()
+            times[k].append(time.process_time() - t0)
+    return [float(np.min(t)) for t in times]
+
+
+def setup(n, rng, closed=False):
+    if closed:    # a ring (folded band, half-bandwidth 19)
+        rod = der.rod_from_shape(der.shapes.ring(1.0, n), 1.0, 1.5)
+    else:
+        rod = der.rod_from_shape(der.shapes.helix(1.0, 0.6, max(1.0, n / 100), n), 1.0, 1.5)
     base = rod.rest_state()
     st = base.copy()
     st.q += 1e-3 * rng.standard_normal(st.q.shape)
-    st.q[-1] = 0.0
+    if not closed:
+        st.q[-1] = 0.0
     transport_frames(st.q, rod.edge_nodes, rod.vertex_edges, base.tangents, base.d1, base.reference_twist,
                      st.tangents, st.d1, st.reference_twist)
     k = 10.0 * rod.A1 / rod.l_bar ** 3
@@ -278,6 +415,7 @@ def main(argv=None):
     ap.add_argument("--n", type=int, nargs="+", default=[100, 1000, 10000])
     ap.add_argument("--repeat", type=int, default=7)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--closed", action="store_true", help="a ring instead of the open helix")
     args = ap.parse_args(argv)
     rng = np.random.default_rng(0)
     t0 = time.perf_counter()
@@ -287,11 +425,12 @@ def main(argv=None):
     g, f, ab = np.zeros(rod.n_dof), np.zeros(rod.n_dof), new_band(rod.n_dof, kl, ku)
     evaluate(plan, st.q, st.d1, st.reference_twist, lam, 2, g, f, ab, kl, ku, perm)
     legacy_hessian(plan, st.q, st.d1, st.reference_twist, lam, g, ab, kl, ku, perm)
+    before_hessian(plan, st.q, st.d1, st.reference_twist, lam, g, ab, kl, ku, perm)
     separate_gradient(plan, st.q, st.d1, st.reference_twist, lam, g)
     compile_s = time.perf_counter() - t0
     rows = []
     for n in args.n:
-        rod, st, k, lam = setup(n, rng)
+        rod, st, k, lam = setup(n, rng, args.closed)
         plan = make_plan(der.Scene(rod), k)
         kl, ku, perm = band_layout(rod.n_nodes, rod.closed)
         g, f, ab = np.zeros(rod.n_dof), np.zeros(rod.n_dof), new_band(rod.n_dof, kl, ku)
@@ -306,6 +445,11 @@ def main(argv=None):
 
         def legacy_hess():
             legacy_hessian(plan, st.q, st.d1, st.reference_twist, lam, g_old, ab_old, kl, ku, perm)
+
+        g_before, ab_before = np.zeros(rod.n_dof), new_band(rod.n_dof, kl, ku)
+
+        def before_hess():
+            before_hessian(plan, st.q, st.d1, st.reference_twist, lam, g_before, ab_before, kl, ku, perm)
 
         g_sep = np.zeros(rod.n_dof)
 
@@ -345,6 +489,10 @@ def main(argv=None):
         legacy_hess()
         legacy_diff = max(np.abs(g_old - g).max() / np.abs(g).max(), np.abs(ab_old - ab).max() / np.abs(ab).max())
         assert legacy_diff < 1e-12, legacy_diff
+        before_hess()
+        before_grad_bitwise = bool(np.array_equal(g_before, g))
+        before_diff = np.abs(ab_before - ab).max() / np.abs(ab).max()
+        assert before_grad_bitwise and before_diff <= 1e-14, before_diff
         # the order-1 pass sums exactly as the assembly (bitwise); the old separate passes to round-off
         g_hess = g.copy()
         numba_grad()
@@ -361,12 +509,16 @@ def main(argv=None):
         t_ldlt = max(timed(ldlt, args.repeat) - t_copy, 1e-9)
         ldlt_accepted = linalg.BAND_SOLVES["ldlt"] > solves0["ldlt"]
         numba_hess()
-        r = {"n": n, "grad_numba_s": timed(numba_grad, args.repeat),
+        # the assembly, its c7e7f53 form and the gradient alone, timed alternately (drifts of a shared machine's
+        # load fall on all three)
+        t_grad, t_hess, t_before = timed_alternating((numba_grad, numba_hess, before_hess), args.repeat)
+        r = {"n": n, "grad_numba_s": t_grad,
              "grad_numpy_s": timed(lambda: numpy_evaluate(rod, st.q, st.d1, st.reference_twist, k, lam, False,
                                                           kl, ku, perm), args.repeat),
              "grad_separate_s": timed(separate_grad, args.repeat),
              "grad_same_as_assembly_bitwise": grad_bitwise, "max_rel_diff_grad_separate": separate_diff,
-             "hess_numba_s": timed(numba_hess, args.repeat),
+             "hess_numba_s": t_hess, "hess_before_s": t_before, "max_rel_diff_before": before_diff,
+             "grad_before_bitwise": before_grad_bitwise,
              "hess_legacy_s": timed(legacy_hess, args.repeat),
              "dgbsv_s": t_solve, "max_rel_diff_legacy": legacy_diff,
              "ldlt_solve_s": t_ldlt, "ldlt_accepted": ldlt_accepted, "ldlt_over_dgbsv": t_ldlt / t_solve,
@@ -379,6 +531,8 @@ def main(argv=None):
         r["hess_over_grad_separate"] = r["hess_numba_s"] / r["grad_separate_s"]
         r["hess_legacy_over_grad"] = r["hess_legacy_s"] / r["grad_numba_s"]
         r["legacy_over_new"] = r["hess_legacy_s"] / r["hess_numba_s"]
+        r["hess_before_over_grad"] = r["hess_before_s"] / r["grad_numba_s"]
+        r["before_over_new"] = r["hess_before_s"] / r["hess_numba_s"]
         r["grad_node_evals_per_s"] = rod.n_nodes / r["grad_numba_s"]
         r["hess_node_evals_per_s"] = rod.n_nodes / r["hess_numba_s"]
         rows.append(r)
@@ -408,6 +562,13 @@ def main(argv=None):
           "term and accepted on its backward error; dgbsv: LAPACK's banded LU with partial pivoting)")
     print("(grad: der's order-1 pass, the assembly's sums without the band; grad_sep: the separate stretching, "
           "bending and twisting passes it replaced)")
+    print("this round's assembly against c7e7f53's (hess_before: full local Hessians, 121-entry scatter, zeroing "
+          "and frame-transport passes of their own; same run, alternating calls):")
+    print(f"{'n':>7} {'hess s':>10} {'before s':>10} {'before/new':>11} {'hess/grad':>10} {'before/grad':>12} "
+          f"{'max rel diff':>13}")
+    for r in rows:
+        print(f"{r['n']:>7} {r['hess_numba_s']:>10.2e} {r['hess_before_s']:>10.2e} {r['before_over_new']:>11.2f} "
+              f"{r['hess_over_grad']:>10.2f} {r['hess_before_over_grad']:>12.2f} {r['max_rel_diff_before']:>13.1e}")
     if exps:
         print("time ~ n^p: " + ", ".join(f"{k} = {v:.2f}" for k, v in exps.items()))
     if args.json:

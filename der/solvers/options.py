@@ -48,11 +48,12 @@ class SolverOptions:
     safety : fraction of the stable explicit step used.
     fire_* : FIRE parameters of the explicit solver (Bitzek et al. 2006).
     fire_mass : the explicit solver's fictitious masses (they change the path, not the equilibrium): "stiffness"
-        (default, dynamic relaxation's mass scaling) gives each DOF a mass proportional to its row of the stiffness
-        |K| (Gershgorin's row sum, contact barrier included; recomputed as the rod deforms), so that every DOF has
-        about the same stable step and a stiff mode (the stretch of a rod with large EA) no longer sets the step of
-        the soft ones; "inertia" is the rod's lumped mass and rotational inertia (the old behaviour; always used
-        with an explicit ``dt``, which is physical time).
+        (default, dynamic relaxation's mass scaling) gives each DOF a mass equal to its row sum of the stiffness
+        |K| (Gershgorin's, contact barrier included; recomputed as the rod deforms, each velocity rescaled to keep
+        its DOF's kinetic energy), so that every DOF has about the same stable step and a stiff mode (the stretch
+        of a rod with large EA) no longer sets the step of the soft ones; "inertia" is the rod's lumped mass and
+        rotational inertia (the old behaviour; always used with an explicit ``dt``, which is physical time, and
+        for inextensible rods, whose stretch is projected out).
     check_every : explicit steps between residual checks, progress and recording.
     inextensible_penalty : penalty c of the augmented Lagrangian, k_j = c A1 / l_j^3 (inextensible rods).
     displacement_tol : explicit solver only: when its residual stalls at the round-off floor, the state counts as

@@ -75,3 +75,70 @@ def test_explicit_refuses_obstacles_and_several_rods():
     two = der.Scene([rod, rod], contacts=[der.rod_contact(0.01)])
     with pytest.raises(ValueError, match="implicit"):
         der.solve(two, solver="explicit")
+
+
+def test_gradient_only_barrier_and_the_step_bound_agree_with_pair_barrier_and_ccd():
+    """The explicit contact kernel's per-step shortcuts: ``pair_barrier_gradient`` is ``pair_barrier`` without the
+    Hessian (bitwise the same energy, gap and gradient), ``barrier_gradient`` (which skips pairs farther than dhat
+    by their bounding spheres) sums to the same force and returns a lower bound of every pair's gap, and whenever
+    ``step_bound_safe`` accepts a step without CCD, CCD proves it too (tau = 1)."""
+    from der.contact.barrier import GAP, pair_barrier
+    from der.contact.ccd import pairs_ccd
+    from der.contact.distance import segment_distance2
+    from der.solvers.explicit_contact import (MIN_GAP_FRACTION, barrier_gradient, pair_barrier_gradient,
+                                              step_bound_safe)
+
+    rng = np.random.default_rng(3)
+    r, dhat, kappa = 0.05, 0.02, 7.0
+    g_ref, H, g = np.empty(12), np.empty((12, 12)), np.empty(12)
+    active = 0
+    for _ in range(3000):
+        x = rng.normal(size=12) * 0.15
+        e_ref, z_ref = pair_barrier(x, 2 * r, dhat, kappa, GAP, False, g_ref, H)
+        g[:] = 0.0
+        e, z = pair_barrier_gradient(x, 2 * r, dhat, kappa, g)
+        assert z == z_ref and (e == e_ref or (np.isinf(e) and np.isinf(e_ref)))
+        if 0.0 < e_ref < np.inf:
+            active += 1
+            assert np.array_equal(g, g_ref)
+    assert active > 50
+    # a random polyline: all non-neighbour pairs, the summed barrier and the gap bound
+    n_nodes = 30
+    pos = np.cumsum(rng.normal(size=(n_nodes, 3)) * 0.06, axis=0)
+    q = np.zeros(4 * n_nodes)
+    q.reshape(-1, 4)[:, :3] = pos
+    edges = np.column_stack([np.arange(n_nodes - 1), np.arange(1, n_nodes)])
+    pairs = np.array([(a, b) for a in range(n_nodes - 1) for b in range(a + 2, n_nodes - 1)])
+    radius = np.full(n_nodes - 1, 0.01)
+    gaps = []
+    for a, b in pairs:
+        xab = np.concatenate([pos[edges[a, 0]], pos[edges[a, 1]], pos[edges[b, 0]], pos[edges[b, 1]]])
+        gaps.append(np.sqrt(segment_distance2(xab)) - 0.02)
+    keep = np.array(gaps) > 0
+    pairs = pairs[keep]
+    grad = np.zeros_like(q)
+    energy, min_gap = barrier_gradient(q, edges, pairs, radius, 0.05, kappa, grad)
+    ref = np.zeros_like(q)
+    e_ref = 0.0
+    for a, b in pairs:
+        nodes = [edges[a, 0], edges[a, 1], edges[b, 0], edges[b, 1]]
+        xab = np.concatenate([pos[k] for k in nodes])
+        e, _ = pair_barrier(xab, 0.02, 0.05, kappa, GAP, False, g_ref, H)
+        if e > 0:
+            e_ref += e
+            for k, nd in enumerate(nodes):
+                ref[4 * nd:4 * nd + 3] += g_ref[3 * k:3 * k + 3]
+    assert energy == pytest.approx(e_ref, rel=1e-13) and e_ref > 0
+    assert np.allclose(grad, ref, rtol=1e-13, atol=1e-13 * np.abs(ref).max())
+    assert min_gap <= min(np.array(gaps)[keep]) + 1e-15
+    proven = 0
+    lo = np.zeros_like(q)
+    for scale in np.geomspace(1e-4, 1.0, 40):
+        dpos = rng.normal(size=(n_nodes, 3)) * scale * min_gap
+        q_new = q.copy()
+        q_new.reshape(-1, 4)[:, :3] += dpos
+        if step_bound_safe(q_new, lo, q, lo, n_nodes, min_gap, MIN_GAP_FRACTION):
+            proven += 1
+            tau, _, _ = pairs_ccd(pos, dpos, edges, pairs, radius, MIN_GAP_FRACTION, 1e-6, 10000)
+            assert tau == 1.0
+    assert proven >= 5

@@ -1,4 +1,4 @@
-"""Explicit damped dynamics (the reference solver): FIRE (Bitzek et al. 2006) on the rod's true inertia.
+"""Explicit damped dynamics (the reference solver): FIRE (Bitzek et al. 2006) with stiffness-scaled masses.
 
 Semi-implicit (symplectic) Euler with the FIRE velocity mixing and restarts, mass-weighted so that node
 translations and cross-section rotations mix in consistent units. The total energy is kinetic + elastic - the
@@ -9,6 +9,15 @@ limit ``2 / omega_max``, with ``omega_max^2`` bounded by Gershgorin's theorem on
 mode -- stretch, bend or twist -- is the stiffest. By default the step is capped at ``safety / omega_max``, half
 the limit, where a step from rest lowers the energy of every mode. A step that would raise the total energy is rejected and
 restarted from rest (for circulatory loads, which can feed energy in, only a large rise is: an unstable step).
+
+The masses are fictitious by default (``SolverOptions.fire_mass = "stiffness"``, dynamic relaxation's mass
+scaling): each DOF's mass is its Gershgorin row sum of |K| (contact barrier included), recomputed with the stable
+step every 10 kernel calls, so that every DOF has about the same stable step and a stiff mode (the stretch of a
+rod with EA = 1e5 at h = 0.05) no longer sets the step of the soft bending modes: the plectoneme's continuation
+steps before buckling took 10x fewer FIRE steps (README, "The explicit solver on every scenario"). The masses
+change the path, not the equilibrium; when they are updated each velocity is rescaled to keep its DOF's kinetic
+energy, so the total energy stays a Lyapunov function. "inertia" (the rod's lumped mass and rotational inertia) is used with an
+explicit ``dt`` (physical time) and for inextensible rods (their stiff stretch is projected out already).
 
 An inextensible rod moves on its constraint manifold |e_j| = l_j (``der.solvers.projection``): the force is
 split into its tangent part and the tension (the multiplier, kept in ``state.lam``), positions are projected
@@ -60,6 +69,48 @@ def _gershgorin(ab, kl, ku, perm, mass):
         for i in range(max(0, j - ku), min(n - 1, j + kl) + 1):
             rows[i] += abs(ab[off + i - j, j]) / np.sqrt(mass[inv[i]] * mj)
     return rows.max()
+
+
+@njit(cache=True)
+def _gershgorin_rows(ab, kl, ku, perm, mass, rows):
+    """rows[d] += sum_j |K_dj| / sqrt(m_d m_j) for every DOF d (DOF order; mass = 1 gives the plain row sums of |K|)."""
+    n = ab.shape[1]
+    off = kl + ku
+    inv = np.empty(n, dtype=np.int64)
+    for d in range(n):
+        inv[perm[d]] = d
+    for j in range(n):
+        mj = mass[inv[j]]
+        for i in range(max(0, j - ku), min(n - 1, j + kl) + 1):
+            rows[inv[i]] += abs(ab[off + i - j, j]) / np.sqrt(mass[inv[i]] * mj)
+    return rows
+
+
+MASS_FLOOR = 1e-9     # a fictitious mass is at least this fraction of the largest (a DOF of almost no stiffness)
+
+
+def stiffness_mass(system, state, contact=None):
+    """(mass, omega2): dynamic relaxation's fictitious masses, m_d = sum_j |K_dj| (Gershgorin's row sum of the
+    constrained stiffness at ``state``, the contact barrier's Hessian added if ``contact`` is given; at least
+    MASS_FLOOR of the largest; 1 on held DOFs), and the Gershgorin bound of omega_max^2 of M^-1/2 |K| M^-1/2 with
+    them (about 1: every DOF has about the same stable step). They change the path of the damped dynamics, not
+    its equilibrium; the FIRE step is then in the units of these masses."""
+    ab = np.zeros_like(system.ab)
+    n = system.n_dof
+    evaluate(system.plan, state.q, state.d1, state.reference_twist, state.lam, 2, np.zeros(n), np.zeros(n), ab,
+             system.kl, system.ku, system.perm, state.q_lo)
+    _zero_fixed(ab, system)
+    ones = np.ones(n)
+    rows = _gershgorin_rows(ab, system.kl, system.ku, system.perm, ones, np.zeros(n))
+    if contact is not None:
+        contact.barrier_rows(state, ones, rows)
+    mass = np.maximum(rows, MASS_FLOOR * rows.max())
+    mass[system.fixed] = 1.0
+    bound = _gershgorin_rows(ab, system.kl, system.ku, system.perm, mass, np.zeros(n))
+    if contact is not None:
+        contact.barrier_rows(state, mass, bound)
+    bound[system.fixed] = 0.0
+    return mass, float(bound.max())
 
 
 def stable_time_step(system, state):
@@ -300,7 +351,22 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
                 f"{strain_tol:.1e}: the constraints hold the inextensible rod away from its rest length (start from a "
                 "state whose clamped edges have their rest length)", solver="explicit", strain=float(held_eps.max()),
                 history=[], dt=None, residual_floor=float("nan"))
+    run, contact = _fire_run, None
+    if system.terms:      # contact: barrier forces and CCD-proven steps (explicit_contact.py)
+        from .explicit_contact import ContactRun
+
+        contact = ContactRun(system)
+        run = contact.run
+    # the fictitious masses (SolverOptions.fire_mass): scaled to the stiffness unless the user's dt is physical
+    # time; an inextensible rod keeps its inertia (its stiff stretch is already projected out, and the residual
+    # of its projected force is measured in the inertia's metric)
+    true_mass = system.mass
+    scaled = options.fire_mass == "stiffness" and options.dt is None and not project
+    if scaled:
+        system.mass, omega2 = stiffness_mass(system, state, contact)
     dt_stable, bounds = stable_time_step(system, state)
+    if scaled:
+        dt_stable = 2.0 / np.sqrt(omega2)     # the bound with the contact barrier's share
     stiffest = max((k for k in bounds if k != "all"), key=lambda k: bounds[k], default="all")
     if options.dt is not None and options.dt > dt_stable:
         _restore_penalty(system, state)
@@ -332,12 +398,6 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
     noise = np.zeros(rod.n_dof)
     floor = np.nan
     step_cost = None      # measured seconds per step: sizes the chunks
-    run, contact = _fire_run, None
-    if system.terms:      # contact: barrier forces and CCD-proven steps (explicit_contact.py)
-        from .explicit_contact import ContactRun
-
-        contact = ContactRun(system)
-        run = contact.run
     try:
         while True:
             passes += 1
@@ -458,17 +518,28 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
                 break
             if passes % 10 == 0 and options.dt is None:
                 # the stiffness changes as the rod deforms: keep the step below the stable limit
-                dt_stable, bounds = stable_time_step(system, state)
+                if scaled:
+                    # and the masses follow it (a coiling rod turns its stretch into other coordinates; a contact's
+                    # barrier stiffens); each velocity is rescaled to keep its DOF's kinetic energy, so the total
+                    # energy the guard watches is unchanged (it stays a Lyapunov function across updates)
+                    mass, omega2 = stiffness_mass(system, state, contact)
+                    v *= np.sqrt(system.mass / mass)
+                    system.mass = mass
+                    dt_stable = 2.0 / np.sqrt(omega2)
+                else:
+                    dt_stable, bounds = stable_time_step(system, state)
                 dt_cap = options.safety * 0.5 * dt_stable
                 dt_max = min(dt_max, dt_cap)
                 dt = min(dt, dt_max)
     except INTERRUPTS as exc:
         if not is_interrupt(exc):
+            system.mass = true_mass
             _restore_penalty(system, state)
             raise
         state.copy_from(last_good)
         status, message = "interrupted", "interrupted by the user; last state kept"
     wall = time.perf_counter() - t_start
+    system.mass = true_mass
     _restore_penalty(system, state)
     how = "edge lengths held by projection; " if project else ""
     if contact is not None:
@@ -476,7 +547,7 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
                 f"barrier stiffness {contact.term.kappa:.3g}; ")
     res = final_result(system, state, status, residual=float(residual), iterations=steps, wall_time=wall,
                        message=message + f" ({how}{rejected_total} steps rejected; stiffest mode: {stiffest}, dt_max "
-                       f"{dt_max:.2e})", solver="explicit", strain=strain, history=history, dt=dt,
+                       f"{dt_max:.2e}{' in the stiffness-scaled masses' if scaled else ''})", solver="explicit", strain=strain, history=history, dt=dt,
                        residual_floor=float(floor))
     res.total_energy = energies
     res.dt_max = dt_max      # the step cap the run ended with (the stable-step bound times safety / 2)

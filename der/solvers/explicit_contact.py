@@ -4,13 +4,17 @@ The FIRE kernel of ``explicit.py`` with three additions, kept in this module so 
 imports no contact code (``explicit.py`` imports this only when the scene has contact terms):
 
 1. Forces: the barrier gradient of the self-contact pairs (``der.self_contact`` / ``der.rod_contact`` on one
-   rod) is added to dE/dq at every step, and the barrier energy to the energy the FIRE guard watches (the
+   rod; ``barrier_gradient``: bounding spheres first, then the gradient without the distance Hessian) is added
+   to dE/dq at every step, and the barrier energy to the energy the FIRE guard watches (the
    total kinetic + elastic + barrier - load work never increases, as without contact).
-2. No passage: every step is first tried, then checked by continuous collision detection along the straight
-   path from the old to the new positions (``der.contact.ccd.pairs_ccd``: every listed pair keeps at least
-   ``MIN_GAP_FRACTION`` of its gap over the whole step). A step that CCD does not prove safe is rejected like
-   one that raises the energy: back to the old state, at rest, with a smaller step. Accepted steps are
-   therefore proven non-crossing, however large the forces.
+2. No passage: every step is first tried, then proven to keep every listed pair at least ``MIN_GAP_FRACTION``
+   of its gap along the straight path from the old to the new positions -- by a bound when it holds
+   (``step_bound_safe``: twice the largest node displacement at most (1 - MIN_GAP_FRACTION) times the smallest
+   gap of the start, the distance of two segments being 1-Lipschitz in each one's displacement), otherwise by
+   continuous collision detection (``der.contact.ccd.pairs_ccd``). A step that neither proves safe is rejected
+   like one that raises the energy: back to the old state, at rest, with a smaller step. Accepted steps are
+   therefore proven non-crossing, however large the forces. (FIRE steps are tiny against the gaps: the bound
+   holds on almost every step, and the CCD over ~1,000 pairs, 140 us a step, is rarely run.)
 3. Candidate pairs (a Verlet list): the broad phase runs in Python on boxes inflated by ``dhat + 2 margin``;
    pairs not in the list are then more than dhat + 2 margin apart. The kernel ends its call (status
    ``STATUS_REBUILD``) before any step that would move a node more than ``margin`` from where the list was
@@ -25,8 +29,9 @@ from numba import njit
 # issue 17 (geometry.edge_array's low parts, stencils.curvature_binormal_of / elongation) so that its
 # kernels are compiled again with them.
 
-from ..contact.barrier import GAP, pair_barrier
+from ..contact.barrier import GAP, barrier, barrier_first_derivative, gap_variable, pair_barrier
 from ..contact.ccd import pairs_ccd
+from ..contact.distance import closest_parameters, segment_distance2
 from ..geometry import add_compensated_one, edge_array, transport_frames
 from ..linalg import condense_vector
 from ..scene import evaluate
@@ -39,13 +44,45 @@ CCD_TOL, CCD_MAX_ITER = 1e-6, 10000
 
 
 @njit(cache=True)
+def pair_barrier_gradient(x, off, dhat, kappa, g):
+    """``contact.barrier.pair_barrier``'s energy, gap and gradient (into g (12,)) of one edge pair x (12,), GAP
+    variable, without the Hessian: the same arithmetic (closest points, dD/dx = 2 (ca x I)^T r, chain rule through
+    the gap), bitwise the same gradient. Returns (energy, gap); energy 0 with g untouched beyond the support, +inf
+    on an overlap."""
+    D, s, t, region = closest_parameters(x)
+    z, zh, z1, z2 = gap_variable(D, off, dhat, GAP)
+    if z >= zh:
+        return 0.0, z
+    if z <= 0.0:
+        return np.inf, z
+    c1 = kappa * barrier_first_derivative(z, zh) * z1
+    ca0, ca1, ca2, ca3 = 1.0 - s, s, t - 1.0, -t
+    for i in range(3):
+        r = 0.0
+        r += ca0 * x[i]
+        r += ca1 * x[3 + i]
+        r += ca2 * x[6 + i]
+        r += ca3 * x[9 + i]
+        g[i] = c1 * (2.0 * ca0 * r)
+        g[3 + i] = c1 * (2.0 * ca1 * r)
+        g[6 + i] = c1 * (2.0 * ca2 * r)
+        g[9 + i] = c1 * (2.0 * ca3 * r)
+    return kappa * barrier(z, zh), z
+
+
+@njit(cache=True)
 def barrier_gradient(q, edges, pairs, edge_radius, dhat, kappa, grad, q_lo=None):
     """kappa sum b(gap) over the pairs (GAP variable), and its gradient added into ``grad`` (n_dof,) at the node
     DOFs 4 k (positions are q.reshape(-1, 4)[:, :3], plus the low parts ``q_lo`` of compensated positions if
-    given). Returns (energy, min gap); energy +inf on an overlap."""
+    given). Returns (energy, min gap); energy +inf on an overlap. The min gap is a lower bound of every listed
+    pair's gap (exact for the pairs within dhat; a pair farther than dhat by its bounding spheres is not measured
+    and contributes that sphere bound), which is what ``step_bound_safe`` needs.
+
+    Each pair within reach goes through ``pair_barrier_gradient`` (no distance Hessian): a FIRE step of the plectoneme at
+    n = 400 spent 143 us on its ~400 candidate pairs (straight rod) and 1100 (plectoneme) with ``pair_barrier``'s
+    12 x 12 Hessians (tools/bench_explicit_contact.py)."""
     x = np.empty(12)
     g = np.empty(12)
-    H = np.empty((12, 12))
     energy = 0.0
     min_gap = np.inf
     for p in range(pairs.shape[0]):
@@ -56,7 +93,21 @@ def barrier_gradient(q, edges, pairs, edge_radius, dhat, kappa, grad, q_lo=None)
                 x[3 * k + i] = q[4 * nodes[k] + i]
                 if q_lo is not None:
                     x[3 * k + i] += q_lo[4 * nodes[k] + i]
-        e, z = pair_barrier(x, edge_radius[ea] + edge_radius[eb], dhat, kappa, GAP, False, g, H)
+        off = edge_radius[ea] + edge_radius[eb]
+        # bounding spheres: every point of a segment lies within half its length of its midpoint, so
+        # |m_a - m_b| - (l_a + l_b) / 2 - off is a lower bound of the gap; beyond dhat the pair has no force
+        mm = 0.0
+        la = 0.0
+        lb = 0.0
+        for i in range(3):
+            mm += (0.5 * (x[i] + x[3 + i] - x[6 + i] - x[9 + i])) ** 2
+            la += (x[3 + i] - x[i]) ** 2
+            lb += (x[9 + i] - x[6 + i]) ** 2
+        bound = np.sqrt(mm) - 0.5 * (np.sqrt(la) + np.sqrt(lb)) - off
+        if bound >= dhat * (1.0 + 1e-12):
+            min_gap = min(min_gap, bound)
+            continue
+        e, z = pair_barrier_gradient(x, off, dhat, kappa, g)
         min_gap = min(min_gap, z)
         if e == 0.0:
             continue
@@ -67,6 +118,37 @@ def barrier_gradient(q, edges, pairs, edge_radius, dhat, kappa, grad, q_lo=None)
             for i in range(3):
                 grad[4 * nodes[k] + i] += g[3 * k + i]
     return energy, min_gap
+
+
+@njit(cache=True)
+def barrier_rows(q, edges, pairs, edge_radius, dhat, kappa, mass, rows, q_lo=None):
+    """rows[d] += sum_j |H_dj| / sqrt(m_d m_j) of the barrier Hessian H of the listed pairs (node DOFs 4 k + i):
+    the contact barrier's share of the Gershgorin row sums (``explicit.stiffness_mass``)."""
+    x = np.empty(12)
+    g = np.empty(12)
+    H = np.empty((12, 12))
+    dof = np.empty(12, dtype=np.int64)
+    for p in range(pairs.shape[0]):
+        ea, eb = pairs[p, 0], pairs[p, 1]
+        nodes = (edges[ea, 0], edges[ea, 1], edges[eb, 0], edges[eb, 1])
+        for k in range(4):
+            for i in range(3):
+                dof[3 * k + i] = 4 * nodes[k] + i
+                x[3 * k + i] = q[4 * nodes[k] + i]
+                if q_lo is not None:
+                    x[3 * k + i] += q_lo[4 * nodes[k] + i]
+        off = edge_radius[ea] + edge_radius[eb]
+        if np.sqrt(segment_distance2(x)) - off >= dhat:
+            continue
+        e, z = pair_barrier(x, off, dhat, kappa, GAP, False, g, H)
+        if e == 0.0 or not np.isfinite(e):
+            continue
+        for a in range(12):
+            s = 0.0
+            for b in range(12):
+                s += abs(H[a, b]) / np.sqrt(mass[dof[a]] * mass[dof[b]])
+            rows[dof[a]] += s
+    return rows
 
 
 @njit(cache=True)
@@ -89,11 +171,35 @@ def _max_shift(q, x_ref):
 
 
 @njit(cache=True)
+def step_bound_safe(q, q_lo, q_old, lo_old, n_nodes, min_gap, fraction):
+    """True if the step q_old -> q provably keeps every listed pair's gap above ``fraction`` of its start value
+    without CCD. The distance of two segments is 1-Lipschitz in the displacement of each: along the straight
+    path, a pair's gap falls by at most s_a + s_b <= 2 s, s the largest node displacement of the step. So if
+    2 s <= (1 - fraction) min_gap, every pair keeps gap0 - 2 s >= gap0 - (1 - fraction) gap0 = fraction gap0 over
+    the whole step (the gaps of the start state, ``min_gap`` their minimum, as ``barrier_gradient`` returns it).
+    A relative 1e-12 of the coordinates covers the rounding of the positions."""
+    if not (min_gap > 0.0) or not np.isfinite(min_gap):
+        return False
+    s2 = 0.0
+    xmax = 0.0
+    for k in range(n_nodes):
+        d2 = 0.0
+        for i in range(3):
+            j = 4 * k + i
+            d = (q[j] - q_old[j]) + (q_lo[j] - lo_old[j])
+            d2 += d * d
+            xmax = max(xmax, abs(q[j]))
+        s2 = max(s2, d2)
+    return 2.0 * np.sqrt(s2) + 1e-12 * (1.0 + xmax) <= (1.0 - fraction) * min_gap
+
+
+@njit(cache=True)
 def _forces(plan, q, q_lo, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius, dhat, kappa):
-    """Elastic + barrier energy; grad <- dE/dq (barrier included), fext <- the loads."""
+    """(elastic + barrier energy, smallest gap of the listed pairs); grad <- dE/dq (barrier included), fext <- the
+    loads."""
     energy = evaluate(plan, q, d1, twist, lam, 1, grad, fext, ab, kl, ku, perm, q_lo)
-    e_c, _ = barrier_gradient(q, edges, pairs, edge_radius, dhat, kappa, grad, q_lo)
-    return energy + e_c
+    e_c, gap = barrier_gradient(q, edges, pairs, edge_radius, dhat, kappa, grad, q_lo)
+    return energy + e_c, gap
 
 
 @njit(cache=True)
@@ -119,10 +225,11 @@ def fire_run_contact(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, in
     f = np.zeros(n)
     pos0 = np.empty((n_nodes, 3))
     dpos = np.empty((n_nodes, 3))
-    energy = _forces(plan, q, q_lo, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius, dhat,
-                     kappa)
+    energy, gap = _forces(plan, q, q_lo, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius,
+                          dhat, kappa)
     if project:
         energy += tension_energy(q, plan.edge_nodes, plan.l_bar, lam, q_lo)
+    new_gap = gap
     residual = np.inf
     rejected = 0
     ccd_rejected = 0
@@ -196,7 +303,7 @@ def fire_run_contact(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, in
                 return (STATUS_REBUILD, step, residual, dt, alpha, n_pos, e_total, work_done, rejected, dt_max,
                         ccd_rejected)
             ok = False          # a single step larger than the margin: reject it, smaller dt
-        if ok and pairs.shape[0]:
+        if ok and pairs.shape[0] and not step_bound_safe(q, q_lo, q_old, lo_old, n_nodes, gap, MIN_GAP_FRACTION):
             # no passage: the straight path q_old -> q must keep every listed pair's gap above a fraction of its
             # start value (a step CCD does not prove safe is rejected below)
             _positions(q_old, n_nodes, pos0)
@@ -215,8 +322,8 @@ def fire_run_contact(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, in
             fext_old_dot += fext[i] * ((q[i] - q_old[i]) + (q_lo[i] - lo_old[i]))
         new_energy = np.inf
         if ok:
-            new_energy = _forces(plan, q, q_lo, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius,
-                                 dhat, kappa)
+            new_energy, new_gap = _forces(plan, q, q_lo, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs,
+                                          edge_radius, dhat, kappa)
             if project:       # the Lagrangian E + lam . g (projection.tension_energy)
                 new_energy += tension_energy(q, plan.edge_nodes, plan.l_bar, lam, q_lo)
         kinetic = 0.0
@@ -241,13 +348,14 @@ def fire_run_contact(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, in
             dt *= f_dec
             alpha = alpha0
             n_pos = 0
-            energy = _forces(plan, q, q_lo, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius, dhat,
-                             kappa)
+            energy, gap = _forces(plan, q, q_lo, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs,
+                                  edge_radius, dhat, kappa)
             if project:
                 energy += tension_energy(q, plan.edge_nodes, plan.l_bar, lam, q_lo)
             e_total = energy - work_done
             continue
         energy = new_energy
+        gap = new_gap
         work_done = new_work
         e_total = new_total
     return (STATUS_RUNNING, n_steps, residual, dt, alpha, n_pos, e_total, work_done, rejected, dt_max,
@@ -278,6 +386,15 @@ class ContactRun:
         """The barrier energy at ``state`` (for the FIRE guard's starting total)."""
         t = self.term
         return float(t.evaluate(state, 0, None, None, None))
+
+    def barrier_rows(self, state, mass, rows):
+        """Add the barrier Hessian's Gershgorin rows at ``state`` (``barrier_rows``) into ``rows``; the pair list is
+        (re)built first if the state has left its margin."""
+        t = self.term
+        if self.x_ref is None or _max_shift(state.q, self.x_ref) > self.margin:
+            self._rebuild(state.q)
+        return barrier_rows(state.q, t.topo.edges, self.pairs, t.topo.edge_radius, t.dhat, t.kappa, mass, rows,
+                            state.q_lo)
 
     def _rebuild(self, q):
         from .. import contact as C

@@ -47,6 +47,13 @@ class SolverOptions:
         half the stability limit 2 / omega_max. A dt above the stability limit is refused with a ValueError.
     safety : fraction of the stable explicit step used.
     fire_* : FIRE parameters of the explicit solver (Bitzek et al. 2006).
+    fire_mass : the explicit solver's fictitious masses (they change the path, not the equilibrium): "stiffness"
+        (default, dynamic relaxation's mass scaling) gives each DOF a mass equal to its row sum of the stiffness
+        |K| (Gershgorin's, contact barrier included; recomputed as the rod deforms, each velocity rescaled to keep
+        its DOF's kinetic energy), so that every DOF has about the same stable step and a stiff mode (the stretch
+        of a rod with large EA) no longer sets the step of the soft ones; "inertia" is the rod's lumped mass and
+        rotational inertia (the old behaviour; always used with an explicit ``dt``, which is physical time, and
+        for inextensible rods, whose stretch is projected out).
     check_every : explicit steps between residual checks, progress and recording.
     inextensible_penalty : penalty c of the augmented Lagrangian, k_j = c A1 / l_j^3 (inextensible rods).
     displacement_tol : explicit solver only: when its residual stalls at the round-off floor, the state counts as
@@ -92,6 +99,7 @@ class SolverOptions:
     fire_f_dec: float = 0.5
     fire_alpha: float = 0.1
     fire_f_alpha: float = 0.99
+    fire_mass: str = "stiffness"
     check_every: int = 200
     inextensible_penalty: float = 10.0
     displacement_tol: float = 1e-6
@@ -118,6 +126,8 @@ class SolverOptions:
             raise ValueError(f"SolverOptions.safety must be in (0, 1]; got {self.safety!r}")
         if self.tight_bend not in TIGHT_BEND:
             raise ValueError(f"SolverOptions.tight_bend must be one of {TIGHT_BEND}; got {self.tight_bend!r}")
+        if self.fire_mass not in FIRE_MASSES:
+            raise ValueError(f"SolverOptions.fire_mass must be one of {FIRE_MASSES}; got {self.fire_mass!r}")
         if not 0 < self.armijo < 0.5:
             raise ValueError(f"SolverOptions.armijo must be in (0, 0.5); got {self.armijo!r}")
 
@@ -130,6 +140,8 @@ class SolverOptions:
     def effective_strain_tol(self):
         return self.tol if self.strain_tol is None else self.strain_tol
 
+
+FIRE_MASSES = ("stiffness", "inertia")
 
 STATUSES = {
     "converged": "residual below tol",

@@ -33,11 +33,13 @@ from the size of an eigenvalue:
   the vertical). A dead torque tau likewise only about tau. The admissible rigid motions (u, w) are the
   null space of the linear conditions "zero on every fixed DOF" and "w x f = 0 for every dead force/torque".
 * the uniform rotation of all cross-sections about their tangents (every theta + c): a symmetry of an
-  isotropic rod with no natural curvature (kappa_bar = 0), whatever the loads (no load depends on theta).
+  isotropic rod with no natural curvature (kappa_bar = 0) unless a load turns with the sections (a follower force
+  along m1 or m2, a follower point torque with an m1 or m2 component).
   It joins the rigid motions as a seventh generator, so the null space also finds its combinations with
   them: a rod held at both ends by clamps on one axis (Euler, Greenhill) turns about that axis, every edge
   angle by t.w - 1, leaving both clamped frames where they were (the two clamped edges lie along w, t.w = 1).
-  With no angle fixed it is the shift alone. Without bending and twisting energies every angle alone is one.
+  With no angle fixed it is the shift alone. Without a twisting energy, and bending only of a straight rod (isotropic
+  or unbent), every angle alone is one.
   An anisotropic rod (A1' != A1) has it only while unbent: bent, turning its sections turns its stiff axis.
 * material sliding along the centreline of a closed ring that is uniform (equal edges, uniform natural
   curvature and twist per length, uniform stiffness; a weld with an imposed twist that is not a whole number
@@ -104,7 +106,7 @@ from numba import njit
 from ..linalg import (BandLU, add_diagonal, band_ldlt, band_ldlt_compact, band_ldlt_solve, band_ldlt_solve_inplace,
                       band_matvec, band_negative_pivots, band_to_sparse, condense_band, constrain_band,
                       ldlt_compact_solve_block)
-from ..loads import DistributedForce, EndForce, EndTorque, PointForce, TwistingMoment
+from ..loads import DistributedForce, EndForce, EndTorque, FollowerForce, PointForce, PointTorque, TwistingMoment
 from .edge_coordinates import EDGE_BAND, EDGE_CHECK_TOL, EdgeCoordinates, band_asymmetry, edge_eligible
 from .system import condense_system_band, evaluate_system, rotational_inertia, take_hessian
 
@@ -135,7 +137,7 @@ def _dead_directions(scene):
             v = np.asarray(load.force, float)
         elif isinstance(load, DistributedForce):
             v = np.asarray(load.density, float)
-        elif isinstance(load, EndTorque) and not load.follower:
+        elif isinstance(load, (EndTorque, PointTorque)) and not load.follower:
             v = np.asarray(load.torque, float)
         else:
             continue
@@ -144,6 +146,19 @@ def _dead_directions(scene):
             v = v / big                     # first scaled to order 1: the norm of a 1e300 force overflows
             dirs.append(v / np.linalg.norm(v))
     return dirs
+
+
+def _loads_turn_with_sections(scene):
+    """Whether a load depends on the sections' angles: a follower force with a component along m1 or m2, a follower
+    point torque given along (m1, m2, t) with one of the first two. Such a load breaks the uniform section turn
+    (every theta + c); dead loads, twisting moments and moments about the tangent do not."""
+    for load in scene.loads:
+        if isinstance(load, FollowerForce) and (load.density[0] != 0.0 or load.density[1] != 0.0):
+            return True
+        if isinstance(load, PointTorque) and load.follower and np.ndim(load.torque) == 1 \
+                and (load.torque[0] != 0.0 or load.torque[1] != 0.0):
+            return True
+    return False
 
 
 def _rigid_generators(rod, state):
@@ -250,11 +265,13 @@ def symmetry_modes(system, state):
     # rigid motions: null space of (values on fixed DOFs, w x f for dead loads) in (u, w)
     energies = set(scene.energies)
     straight = np.abs(rod.kappa_bar).max(initial=0.0) <= 1e-12
-    every_angle_free = "twist" not in energies and ("bend" not in energies or straight)
-    # the uniform section rotation (every theta + 1) as a seventh generator beside the rigid motions
-    # (an anisotropic rod's sections turn freely only while it is unbent: kappa = 0 whatever their orientation)
+    # an anisotropic rod's sections turn freely only while it is unbent (kappa = 0 whatever their orientation);
+    # no section turns freely under a load that turns with it
     unbent = rod.closed is False and np.abs(np.diff(state.tangents, axis=0)).max(initial=0.0) <= 1e-12
-    shift = straight and (rod.isotropic or unbent) and not every_angle_free
+    turnable = (rod.isotropic or unbent) and not _loads_turn_with_sections(scene)
+    every_angle_free = turnable and "twist" not in energies and ("bend" not in energies or straight)
+    # the uniform section rotation (every theta + 1) as a seventh generator beside the rigid motions
+    shift = straight and turnable and not every_angle_free
     fixed_rows = np.flatnonzero(fixed)
     Gf, col = _rigid_generator_rows(rod, state, fixed_rows)
     if shift:
@@ -274,9 +291,10 @@ def symmetry_modes(system, state):
         G = G / col[None, :]
         for k in range(N.shape[1]):
             v = G @ N[:, k]
-            # unit columns, so a combination of norm ~0 is no motion at all: on a straight rod along its axis the
-            # turn about the axis is the shift itself, and their difference moves nothing
-            if np.linalg.norm(v) > 1e-9:
+            # a combination that cancels to round-off is no motion at all: on a straight rod along its axis the turn
+            # about the axis is the shift itself, and their difference moves nothing (judged against the same sum
+            # without cancellation, so the test does not depend on the rod's units or size)
+            if np.linalg.norm(v) > 1e-12 * np.linalg.norm(np.abs(G) @ np.abs(N[:, k])):
                 modes.append(v)
     if every_angle_free:
         for d in np.flatnonzero(free_th):   # no energy depends on any angle

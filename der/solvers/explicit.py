@@ -15,8 +15,8 @@ scaling): each DOF's mass is its Gershgorin row sum of |K| (contact barrier incl
 step every 10 kernel calls, so that every DOF has about the same stable step and a stiff mode (the stretch of a
 rod with EA = 1e5 at h = 0.05) no longer sets the step of the soft bending modes: the plectoneme's continuation
 steps before buckling took 10x fewer FIRE steps (README, "The explicit solver on every scenario"). The masses
-change the path, not the equilibrium; when they are updated each velocity is rescaled to keep its DOF's kinetic
-energy, so the total energy stays a Lyapunov function. "inertia" (the rod's lumped mass and rotational inertia) is used with an
+change the path, not the equilibrium; when they are updated the velocity is rescaled by one common factor that keeps
+the total kinetic energy, so the total energy stays a Lyapunov function and the velocity keeps its direction. "inertia" (the rod's lumped mass and rotational inertia) is used with an
 explicit ``dt`` (physical time) and for inextensible rods (their stiff stretch is projected out already).
 
 An inextensible rod moves on its constraint manifold |e_j| = l_j (``der.solvers.projection``): the force is
@@ -520,10 +520,14 @@ def solve_explicit(system, state, options, progress=None, recorder=None):
                 # the stiffness changes as the rod deforms: keep the step below the stable limit
                 if scaled:
                     # and the masses follow it (a coiling rod turns its stretch into other coordinates; a contact's
-                    # barrier stiffens); each velocity is rescaled to keep its DOF's kinetic energy, so the total
-                    # energy the guard watches is unchanged (it stays a Lyapunov function across updates)
+                    # barrier stiffens); the velocity is rescaled by one common factor that keeps the total kinetic
+                    # energy, so the energy the guard watches is unchanged (a Lyapunov function across updates) and
+                    # the direction FIRE mixes with the force is kept (a rescale per DOF turned it, and the snap into
+                    # the plectoneme then ran into the guard 523 times instead of 29)
                     mass, omega2 = stiffness_mass(system, state, contact)
-                    v *= np.sqrt(system.mass / mass)
+                    kinetic_new = float(np.dot(mass, v * v))
+                    if kinetic_new > 0.0:
+                        v *= np.sqrt(float(np.dot(system.mass, v * v)) / kinetic_new)
                     system.mass = mass
                     dt_stable = 2.0 / np.sqrt(omega2)
                 else:

@@ -49,8 +49,8 @@ class SolverOptions:
     fire_* : FIRE parameters of the explicit solver (Bitzek et al. 2006).
     fire_mass : the explicit solver's fictitious masses (they change the path, not the equilibrium): "stiffness"
         (default, dynamic relaxation's mass scaling) gives each DOF a mass equal to its row sum of the stiffness
-        |K| (Gershgorin's, contact barrier included; recomputed as the rod deforms, each velocity rescaled to keep
-        its DOF's kinetic energy), so that every DOF has about the same stable step and a stiff mode (the stretch
+        |K| (Gershgorin's, contact barrier included; recomputed as the rod deforms, the velocity rescaled by one
+        factor that keeps the kinetic energy), so that every DOF has about the same stable step and a stiff mode (the stretch
         of a rod with large EA) no longer sets the step of the soft ones; "inertia" is the rod's lumped mass and
         rotational inertia (the old behaviour; always used with an explicit ``dt``, which is physical time, and
         for inextensible rods, whose stretch is projected out).

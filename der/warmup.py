@@ -69,8 +69,8 @@ def warmup():
     """Run every kernel once on tiny problems; returns the seconds it took (compilation or cache loading).
 
     A first process compiles (a few minutes: ``tools/compile_time.py`` measures it per kernel; it prints
-    "compiling der's kernels (first run only, a few minutes)" to stderr first); later processes load numba's on-disk cache (well under 1 s). ``der.solve``
-    calls it on its first use, so you need it only to time something else without the JIT. Calling it again
+    "compiling der's kernels (first run only, a few minutes)" to stderr first); later processes load numba's
+    on-disk cache (well under 1 s). ``der.solve`` calls it on its first use, so you need it only to time something else without the JIT. Calling it again
     returns 0.
 
     Example

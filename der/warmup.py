@@ -1,7 +1,7 @@
 """Compile (or load from numba's cache) every kernel once, on tiny scenes, so that timings exclude the JIT.
 
 The first ``der.solve`` of a process calls ``warmup`` before it starts its clock, so that neither compilation
-(tens of seconds on a cold cache, announced on stderr) nor loading the compiled kernels from numba's on-disk
+(a few minutes on a cold cache, announced on stderr) nor loading the compiled kernels from numba's on-disk
 cache (under a second) is counted in ``SolveResult.wall_time``; that time is ``SolveResult.compile_time``.
 """
 import os
@@ -10,7 +10,7 @@ import time
 
 _DONE = False
 _RUNNING = False
-COMPILE_MESSAGE = "[der] compiling der's kernels (first run only, about a minute)"
+COMPILE_MESSAGE = "[der] compiling der's kernels (first run only, a few minutes)"
 # the modules that define numba kernels (imported by ``cache_is_cold`` to inspect their caches)
 KERNEL_MODULES = ("der.geometry", "der.stencils", "der.linalg", "der.energies.stretch", "der.energies.bend",
                   "der.energies.twist", "der.loads", "der.scene", "der.diagnostics", "der.solvers.system",
@@ -68,9 +68,9 @@ def cache_is_cold():
 def warmup():
     """Run every kernel once on tiny problems; returns the seconds it took (compilation or cache loading).
 
-    A first process compiles (tens of seconds; it prints "compiling der's kernels (first run only, about a
-    minute)" to stderr first); later processes load numba's on-disk cache (well under 1 s). ``der.solve``
-    calls it on its first use, so you need it only to time something else without the JIT. Calling it again
+    A first process compiles (a few minutes: ``tools/compile_time.py`` measures it per kernel; it prints
+    "compiling der's kernels (first run only, a few minutes)" to stderr first); later processes load numba's
+    on-disk cache (well under 1 s). ``der.solve`` calls it on its first use, so you need it only to time something else without the JIT. Calling it again
     returns 0.
 
     Example

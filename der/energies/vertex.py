@@ -70,8 +70,9 @@ def stretch_bend_twist_hessian(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_
     written into both triangles of the band (``_bend_twist_local``): the energy part is exactly symmetric. Returns
     ``(stretch, bending, twisting)`` energies. ``E``: the edge vectors (``geometry.edge_array``; formed from ``q``
     if None)."""
+    Ee = edge_array(q, edge_nodes) if E is None else E
     return _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_stretch, lam, reference_twist,
-                               weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, kl, ku, perm, E, 2,
+                               weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, kl, ku, perm, Ee, 2,
                                np.empty((0, 3)), np.empty(0), transport)
 
 
@@ -88,20 +89,28 @@ def stretch_bend_twist_gradient(q, ed, edge_nodes, vertex_nodes, vertex_edges, l
     that pass's work is then done here."""
     ab = np.empty((0, 0))
     perm = np.empty(0, dtype=np.int64)
+    Ee = edge_array(q, edge_nodes) if E is None else E
     if F is None or M is None:
         return _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_stretch, lam,
                                    reference_twist, weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, 0, 0,
-                                   perm, E, 1, np.empty((0, 3)), np.empty(0), False)
+                                   perm, Ee, 1, np.empty((0, 3)), np.empty(0), False)
     return _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_stretch, lam, reference_twist,
-                               weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, 0, 0, perm, E, 1, F, M, False)
+                               weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, 0, 0, perm, Ee, 1, F, M, False)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_stretch, lam, reference_twist,
                         weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, kl, ku, perm, E, order, F, M, transport):
     """The pass of ``stretch_bend_twist_hessian`` (order 2) and ``stretch_bend_twist_gradient`` (order 1; with a
-    non-empty ``F`` also the edge forces and vertex moments of ``diagnostics._edge_forces``)."""
-    Ee = edge_array(q, edge_nodes) if E is None else E
+    non-empty ``F`` also the edge forces and vertex moments of ``diagnostics._edge_forces``). ``E``: the edge
+    vectors (an array: the wrappers form it when they are given None).
+
+    Compiled as a function of its own, called by both wrappers, and so is ``_bend_twist_local``: inlined into
+    their callers at numba's level (``inline="always"``), every caller and every call site compiled the whole
+    pass again, the order-2 stencil included in the order-1 kernel, and the first run's warm-up took 387 s of
+    CPU instead of 218 s (``python tools/compile_time.py --against a64a219``). One call per evaluation and one
+    per vertex cost nothing measurable (``tools/bench_kernels.py``, docs/scaling.md)."""
+    Ee = E
     n_edges = edge_nodes.shape[0]
     g8 = np.empty(8)
     H8 = np.empty((8, 8))
@@ -246,7 +255,7 @@ def _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_
 # ``energies.bend._bend_local`` and ``energies.twist._twist_local``, regrouped (to round-off).
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _bend_twist_local(q, ed, vertex_edges, reference_twist, weld, v, kappa_bar, b1, b2, mbar, stiff, g8, H, D):
     """The bending (stiffnesses ``b1``, ``b2``, as ``energies.bend._bend_local``) and twisting (``mbar``,
     ``stiff``, as ``energies.twist._twist_local``) of vertex ``v``: returns their energies, ``g8`` <- the sum of

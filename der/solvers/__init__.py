@@ -52,7 +52,7 @@ def solve(scene, state=None, solver="implicit", options=None, record=None, raise
     SolveResult, with the stability of the equilibrium (``min_eigenvalue``, ``stable``) when converged;
     ``print(result)`` shows a short summary. ``wall_time`` is the solve alone: the first solve of a process
     first compiles der's kernels (or loads them from numba's cache), reported apart as ``compile_time``; on a
-    cold cache it prints "compiling der's kernels (first run only, about a minute)" to stderr before it does.
+    cold cache it prints "compiling der's kernels (first run only, a few minutes)" to stderr before it does.
 
     Raises
     ------

@@ -70,8 +70,8 @@ def warmup():
 
     A first process compiles (a few minutes: ``tools/compile_time.py`` measures it per kernel; it prints
     "compiling der's kernels (first run only, a few minutes)" to stderr first); later processes load numba's
-    on-disk cache (well under 1 s). ``der.solve`` calls it on its first use, so you need it only to time something else without the JIT. Calling it again
-    returns 0.
+    on-disk cache (well under 1 s). ``der.solve`` calls it on its first use, so you need it only to time
+    something else without the JIT. Calling it again returns 0.
 
     Example
     -------

@@ -72,9 +72,11 @@ def stretch_bend_twist_hessian(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_
     ``(stretch, bending, twisting)`` energies. ``E``: the edge vectors (``geometry.edge_array``; formed from ``q``
     if None)."""
     Ee = edge_array(q, edge_nodes) if E is None else E
+    # the order and the flag as runtime values, not literals: one compiled version of the pass serves both
+    # wrappers (each literal value was a compilation of its own, ~8 s each; tools/compile_time.py)
     return _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_stretch, lam, reference_twist,
-                               weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, kl, ku, perm, Ee, 2,
-                               np.empty((0, 3)), np.empty(0), transport)
+                               weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, kl, ku, perm, Ee, np.int64(2),
+                               np.empty((0, 3)), np.empty(0), transport == True)  # noqa: E712
 
 
 @njit(cache=True)
@@ -88,15 +90,19 @@ def stretch_bend_twist_gradient(q, ed, edge_nodes, vertex_nodes, vertex_edges, l
     With ``F`` (n_edges, 3) and ``M`` (n_vertices,) also the internal force on every edge and the moment magnitude
     at every vertex, bitwise those of ``diagnostics._edge_forces`` (the solver's load scale) on the same edges:
     that pass's work is then done here."""
-    ab = np.empty((0, 0))
+    # the same argument types as the Hessian's call (a Fortran-ordered band, runtime integers and flag): one
+    # compiled version of the pass for both
+    ab = np.empty((0, 0)).T
     perm = np.empty(0, dtype=np.int64)
+    zero = np.int64(perm.shape[0])
     Ee = edge_array(q, edge_nodes) if E is None else E
     if F is None or M is None:
         return _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_stretch, lam,
-                                   reference_twist, weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, 0, 0,
-                                   perm, Ee, 1, np.empty((0, 3)), np.empty(0), False)
+                                   reference_twist, weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, zero, zero,
+                                   perm, Ee, np.int64(1), np.empty((0, 3)), np.empty(0), zero > 0)
     return _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_stretch, lam, reference_twist,
-                               weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, 0, 0, perm, Ee, 1, F, M, False)
+                               weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, zero, zero, perm, Ee,
+                               np.int64(1), F, M, zero > 0)
 
 
 @njit(cache=True)

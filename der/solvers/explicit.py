@@ -163,14 +163,14 @@ def _fire_run(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, inv_scale
     n = q.shape[0]
     grad = np.zeros(n)
     fext = np.zeros(n)
-    ab = np.zeros((1, 1))
+    ab = np.zeros((1, 1)).T    # Fortran-ordered like the solvers' bands: the kernels compile once for both
     q_old = q.copy()
     lo_old = q_lo.copy()
     d1_old = d1.copy()
     t_old = tangents.copy()
     tw_old = twist.copy()
     f = np.zeros(n)
-    energy = evaluate(plan, q, d1, twist, lam, 1, grad, fext, ab, kl, ku, perm, q_lo)
+    energy = evaluate(plan, q, d1, twist, lam, np.int64(1), grad, fext, ab, kl, ku, perm, q_lo)
     if project:
         energy += tension_energy(q, plan.edge_nodes, plan.l_bar, lam, q_lo)
     residual = np.inf
@@ -246,7 +246,7 @@ def _fire_run(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, inv_scale
             fext_old_dot += fext[i] * ((q[i] - q_old[i]) + (q_lo[i] - lo_old[i]))
         new_energy = np.inf
         if ok:
-            new_energy = evaluate(plan, q, d1, twist, lam, 1, grad, fext, ab, kl, ku, perm, q_lo)
+            new_energy = evaluate(plan, q, d1, twist, lam, np.int64(1), grad, fext, ab, kl, ku, perm, q_lo)
             if project:       # the Lagrangian E + lam . g (projection.tension_energy)
                 new_energy += tension_energy(q, plan.edge_nodes, plan.l_bar, lam, q_lo)
         kinetic = 0.0
@@ -277,7 +277,7 @@ def _fire_run(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, inv_scale
             dt *= f_dec
             alpha = alpha0
             n_pos = 0
-            energy = evaluate(plan, q, d1, twist, lam, 1, grad, fext, ab, kl, ku, perm, q_lo)
+            energy = evaluate(plan, q, d1, twist, lam, np.int64(1), grad, fext, ab, kl, ku, perm, q_lo)
             if project:
                 energy += tension_energy(q, plan.edge_nodes, plan.l_bar, lam, q_lo)
             e_total = energy - work_done

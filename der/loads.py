@@ -36,6 +36,9 @@ LOAD_TYPES = []   # the registered load records, in the order the Scene's error 
 def register(cls):
     """Class decorator: make ``cls`` a load the Scene accepts (its ``constructor`` is named in the Scene's error
     for an unknown load). A new load type is one class here, with this line."""
+    if not (isinstance(cls, type) and issubclass(cls, Load) and isinstance(getattr(cls, "constructor", None), str)):
+        raise TypeError(f"der.loads.register: {cls!r} must be a subclass of der.loads.Load with a `constructor` "
+                        "name (the der function that makes it)")
     LOAD_TYPES.append(cls)
     return cls
 

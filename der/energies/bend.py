@@ -47,7 +47,9 @@ def welded(m1, m2, psi):
 
 # ---- the formulas of one vertex, one home each: called by the kernels below and by the fused vertex pass
 # (``energies.vertex._bend_twist_local``), which then computes the same floating-point operations in the same
-# order (the solver's Newton paths follow round-off)
+# order (the solver's Newton paths follow round-off; ``tools/kernel_fingerprint.py`` checks it bitwise).
+# Editing one of them: numba's cache keys a kernel on its own file only, so also touch energies/vertex.py (its
+# fused kernels inline these, and scene.evaluate calls them) or clear the caches, else they run stale.
 
 
 @njit(cache=True, inline="always")

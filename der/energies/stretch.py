@@ -20,7 +20,9 @@ from ..stencils import edge_dofs, elongation, scatter_band, scatter_gradient
 
 # ---- the formulas of one edge, one home each: called by ``_stretch_local`` and by the fused vertex pass
 # (``energies.vertex._stretch_local_upper``), which then computes the same floating-point operations in the same
-# order
+# order (``tools/kernel_fingerprint.py`` checks it bitwise).
+# Editing one of them: numba's cache keys a kernel on its own file only, so also touch energies/vertex.py (its
+# fused kernels inline these, and scene.evaluate calls them) or clear the caches, else they run stale.
 
 
 @njit(cache=True, inline="always")

@@ -24,6 +24,8 @@ from ..stencils import (
 )
 
 
+# Editing one of them: numba's cache keys a kernel on its own file only, so also touch energies/vertex.py (its
+# fused kernels inline these, and scene.evaluate calls them) or clear the caches, else they run stale.
 @njit(cache=True, inline="always")
 def _material_twist(q, vertex_edges, reference_twist, weld, v):
     """``material_twist``'s formula, its one home (inlined here and in ``energies.vertex._bend_twist_local``)."""

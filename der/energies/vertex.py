@@ -25,7 +25,8 @@ from ..geometry import edge_array, transport_jacobian_edge
 from ..linalg import zero_band_column
 from ..stencils import (
     elongation,
-    band_positions, expand_vertex_hessian, scatter_band, scatter_band_symmetric_at, scatter_vertex_gradient, vadd, vcross, vdot, vertex_dofs, vscale, vsub,
+    band_positions, expand_vertex_hessian, scatter_band, scatter_band_symmetric_at, scatter_vertex_gradient, vadd,
+    vcross, vdot, vertex_dofs, vscale, vsub,
 )
 from .bend import _bend_gradient_of, _bend_local, _bend_weights_energy, _curvature_residuals, _vertex_curvatures
 from .stiffness import bending_at, twisting_at
@@ -72,11 +73,12 @@ def stretch_bend_twist_hessian(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_
     ``(stretch, bending, twisting)`` energies. ``E``: the edge vectors (``geometry.edge_array``; formed from ``q``
     if None)."""
     Ee = edge_array(q, edge_nodes) if E is None else E
-    # the order and the flag as runtime values, not literals: one compiled version of the pass serves both
-    # wrappers (each literal value was a compilation of its own, ~8 s each; tools/compile_time.py)
+    # the order as a literal: numba compiles the pass once per order and prunes the other order's branches, so the
+    # residual's order-1 pass does not carry the Hessian's code (~15 s more compilation than one version for both
+    # orders; their speeds differed by less than this machine's noise in tools/bench_kernels.py, 3-10 %)
     return _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_stretch, lam, reference_twist,
-                               weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, kl, ku, perm, Ee, np.int64(2),
-                               np.empty((0, 3)), np.empty(0), transport == True)  # noqa: E712
+                               weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, kl, ku, perm, Ee, 2,
+                               np.empty((0, 3)), np.empty(0), transport)
 
 
 @njit(cache=True)
@@ -90,19 +92,15 @@ def stretch_bend_twist_gradient(q, ed, edge_nodes, vertex_nodes, vertex_edges, l
     With ``F`` (n_edges, 3) and ``M`` (n_vertices,) also the internal force on every edge and the moment magnitude
     at every vertex, bitwise those of ``diagnostics._edge_forces`` (the solver's load scale) on the same edges:
     that pass's work is then done here."""
-    # the same argument types as the Hessian's call (a Fortran-ordered band, runtime integers and flag): one
-    # compiled version of the pass for both
-    ab = np.empty((0, 0)).T
+    ab = np.empty((0, 0))
     perm = np.empty(0, dtype=np.int64)
-    zero = np.int64(perm.shape[0])
     Ee = edge_array(q, edge_nodes) if E is None else E
     if F is None or M is None:
         return _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_stretch, lam,
-                                   reference_twist, weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, zero, zero,
-                                   perm, Ee, np.int64(1), np.empty((0, 3)), np.empty(0), zero > 0)
+                                   reference_twist, weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, 0, 0,
+                                   perm, Ee, 1, np.empty((0, 3)), np.empty(0), False)
     return _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_stretch, lam, reference_twist,
-                               weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, zero, zero, perm, Ee,
-                               np.int64(1), F, M, zero > 0)
+                               weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, 0, 0, perm, Ee, 1, F, M, False)
 
 
 @njit(cache=True)
@@ -115,8 +113,8 @@ def _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_
     Compiled as a function of its own, called by both wrappers, and so is ``_bend_twist_local``: inlined into
     their callers at numba's level (``inline="always"``), every caller and every call site compiled the whole
     pass again, the order-2 stencil included in the order-1 kernel, and the first run's warm-up took 387 s of
-    CPU instead of 218 s (``python tools/compile_time.py --against a64a219``). One call per evaluation and one
-    per vertex cost nothing measurable (``tools/bench_kernels.py``, docs/scaling.md)."""
+    CPU instead of 218 s (s9-compile, ``python tools/compile_time.py --against a64a219``). One call per
+    evaluation and one per vertex cost nothing measurable (``tools/bench_kernels.py``, docs/scaling.md)."""
     Ee = E
     n_edges = edge_nodes.shape[0]
     g8 = np.empty(8)

@@ -162,3 +162,16 @@ def test_the_stability_symmetries_follow_the_loads_answers():
     assert _n_modes(der.Scene(RING, loads=[der.follower_force((0.0, 0.0, 0.3))])) == ring - 1
     # a dead distributed force: translations, the rotation about it, the sliding
     assert _n_modes(der.Scene(RING, loads=[der.distributed_force((0.0, 0.0, 0.3))])) == 3 + 1 + 1
+
+
+def test_register_refuses_a_class_that_is_no_load_record():
+    """@register takes only Load subclasses with a constructor name: anything else would later be refused by the
+    Scene with the misleading "unknown load" error."""
+    from der.loads import register
+
+    before = list(LOAD_TYPES)
+    with pytest.raises(TypeError, match="subclass of der.loads.Load"):
+        register(type("NotALoad", (), {"constructor": "not_a_load"}))
+    with pytest.raises(TypeError, match="constructor"):
+        register(type("Nameless", (Load,), {}))
+    assert LOAD_TYPES == before

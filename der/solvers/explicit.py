@@ -57,18 +57,8 @@ NOISE_FACTOR = 3.0     # at the floor, a negative power below this many standard
 
 @njit(cache=True)
 def _gershgorin(ab, kl, ku, perm, mass):
-    """max_i sum_j |K_ij| / sqrt(m_i m_j): an upper bound of omega_max^2."""
-    n = ab.shape[1]
-    off = kl + ku
-    inv = np.empty(n, dtype=np.int64)
-    for d in range(n):
-        inv[perm[d]] = d
-    rows = np.zeros(n)
-    for j in range(n):
-        mj = mass[inv[j]]
-        for i in range(max(0, j - ku), min(n - 1, j + kl) + 1):
-            rows[i] += abs(ab[off + i - j, j]) / np.sqrt(mass[inv[i]] * mj)
-    return rows.max()
+    """max_i sum_j |K_ij| / sqrt(m_i m_j): an upper bound of omega_max^2 (the largest of ``_gershgorin_rows``)."""
+    return _gershgorin_rows(ab, kl, ku, perm, mass, np.zeros(ab.shape[1])).max()
 
 
 @njit(cache=True)

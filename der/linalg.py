@@ -12,6 +12,16 @@ import numpy as np
 from numba import njit
 
 
+def safe_norm(v):
+    """Euclidean norm of a vector without overflow or underflow (scaled by its largest entry, like np.hypot):
+    |(1e200, 0, 0)| is 1e200, not inf."""
+    v = np.asarray(v, dtype=float)
+    m = float(np.abs(v).max()) if v.size else 0.0
+    if m == 0.0 or not np.isfinite(m):
+        return m
+    return m * float(np.sqrt(((v / m) ** 2).sum()))
+
+
 @njit(cache=True)
 def dot(a, b):
     """a . b for 1-d float arrays, in this thread.

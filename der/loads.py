@@ -23,6 +23,7 @@ import numpy as np
 from numba import njit
 
 from . import validate
+from .linalg import safe_norm as _norm     # |v| without overflow
 from .stencils import edge_dofs, scatter_band
 
 
@@ -87,11 +88,6 @@ def _end_edge(rod, end):
     return end_index(rod, end)[2]
 
 
-def _norm(v):
-    """|v| without overflow (``solvers.system.safe_norm``)."""
-    from .solvers.system import safe_norm
-
-    return safe_norm(v)
 
 
 class Load(ABC):

@@ -26,7 +26,7 @@ from ..constraints import NO_LINKS, apply_targets, build_links, enforce_links, r
 from ..diagnostics import _edge_forces
 from ..energies.stretch import elongations
 from ..geometry import edge_array, edge_array_into, edge_frames, transport_frames
-from ..linalg import BandLDLT, band_layout, band_matvec, condense_band, condense_vector, constrain_band, dot, expand_step, new_band
+from ..linalg import BandLDLT, safe_norm, band_layout, band_matvec, condense_band, condense_vector, constrain_band, dot, expand_step, new_band
 from ..scene import COUNTER_NAMES, edge_forces_in_pass, evaluate, make_plan
 
 
@@ -91,16 +91,6 @@ def rotational_inertia(rod):
         return rod.rho_J
     h = rod.l_bar.mean()
     return rod.rho_A * h * h * rod.twisting_scale / (4.0 * rod.bending_scale)
-
-
-def safe_norm(v):
-    """Euclidean norm of a vector without overflow or underflow (scaled by its largest entry, like np.hypot):
-    |(1e200, 0, 0)| is 1e200, not inf."""
-    v = np.asarray(v, dtype=float)
-    m = float(np.abs(v).max()) if v.size else 0.0
-    if m == 0.0 or not np.isfinite(m):
-        return m
-    return m * float(np.sqrt(((v / m) ** 2).sum()))
 
 
 def row_norms(a):

@@ -3,7 +3,7 @@ energy, pseudo-time step, accepted step fraction, line-search halvings, the arc 
 and every multiplier update (largest change of lam, largest lam, penalty k, elongation g). Measurement only: it
 sets ``der.solvers.implicit.TRACE`` for this process.
 
-    python tools/ring_trace.py --n 30000 [--penalty 10] [--soc] [--edge] [--budget 120] [--json]
+    python tools/ring_trace.py --n 30000 [--penalty 10] [--node] [--soc] [--edge] [--budget 120] [--json]
 """
 import argparse
 import json
@@ -20,6 +20,9 @@ def main(argv=None):
     ap.add_argument("--penalty", type=float, default=None, help="SolverOptions.inextensible_penalty")
     ap.add_argument("--soc", action="store_true", help="SolverOptions.second_order_correction=True")
     ap.add_argument("--edge", action="store_true", help="SolverOptions.edge_newton=True")
+    ap.add_argument("--node", action="store_true",
+                    help="edge_newton=False, second_order_correction=False (the default path before stop 27; "
+                         "--soc / --edge then force one of them back on)")
     ap.add_argument("--budget", type=float, default=120.0, help="time budget, s")
     ap.add_argument("--json", action="store_true", help="one JSON line per event instead of a table")
     args = ap.parse_args(argv)
@@ -50,6 +53,8 @@ def main(argv=None):
     opts = {"time_budget": args.budget, "tol": scaling.TOL}
     if args.penalty is not None:
         opts["inextensible_penalty"] = args.penalty
+    if args.node:
+        opts.update(edge_newton=False, second_order_correction=False)
     if args.soc:
         opts["second_order_correction"] = True
     if args.edge:

@@ -35,7 +35,8 @@ def test_second_order_correction_takes_ring_torsion_past_the_chord_error_plateau
 
 
 def test_second_order_correction_is_off_by_default_and_changes_nothing_where_full_steps_pass():
-    assert der.SolverOptions().second_order_correction is False
+    # default None: automatic, off for this coarse ring (c (L/h)^4 = 1.3e8, below implicit.EDGE_NEWTON_CONDITION)
+    assert der.SolverOptions().second_order_correction is None
     scene = ring_torsion(60, 1e-3)          # full Newton steps: the correction is never asked for
     a = der.solve(scene, stability=False)
     b = der.solve(scene, stability=False, second_order_correction=True)
@@ -222,3 +223,25 @@ def test_edge_newton_apply_only_to_open_rods_held_at_their_start():
         assert not edge_eligible(build_system(scene, der.SolverOptions()))
     res = der.solve(held_at_end, stability=False, edge_newton=True)     # the option then changes nothing
     assert res.converged and res.linear_solves.get("edge", 0) == 0 and res.linear_solves["band"] > 0
+
+
+def test_a_fine_inextensible_ring_takes_edge_steps_with_the_correction_by_default():
+    # Stop 27 (docs/scaling.md): ring torsion at 3x10^4 and 10^5 stalled and restarted by default: the node-coordinate
+    # Newton matrix's condition c (L/h)^4 (1e17 at 3x10^4) is beyond double precision, and its straight steps carry
+    # the chord error c A1 / h^3 prices (Maratos). Scaled down: n = 400 with a penalty c = 1e7 puts c (L/h)^4 at
+    # 2.6e17. Old default (node coordinates, no correction): converged after 114 iterations. Now the edge-coordinate
+    # Newton with the second-order correction is on by default there: converged in 6.
+    n, c = 400, 1e7
+    scene = ring_torsion(n, 1e-3)
+    res = der.solve(scene, stability=False, inextensible_penalty=c)
+    assert res.status == "converged" and res.residual <= 1e-8
+    assert res.iterations <= 10, res.iterations
+    assert res.linear_solves.get("edge", 0) == res.iterations and res.linear_solves.get("band", 0) == 0
+    assert "restart" not in res.message
+    ref = cf.ring_end_rotation(1.0, 1.0 / 0.67, 1.0, 3.0, 1e-3)
+    err = np.linalg.norm(dg.end_motion(scene.rod, res.state)[1] - ref) / np.linalg.norm(ref)
+    assert err < 5e-5, err          # the discretisation's error at n = 400 (2.1e-5)
+    # False keeps the node-coordinate path (the old default's 114 iterations)
+    old = der.solve(scene, stability=False, inextensible_penalty=c, edge_newton=False, second_order_correction=False,
+                    max_iterations=20, raise_on_failure=False)
+    assert old.linear_solves.get("edge", 0) == 0 and not old.converged

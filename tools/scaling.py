@@ -156,7 +156,7 @@ def dgbsv_seconds(scene, state, start=None, repeat=3):
     return best, floor, noise
 
 
-def single(problem, n, time_budget=120.0, trace=True, second_order_correction=False, edge_newton=False):
+def single(problem, n, time_budget=120.0, trace=True, second_order_correction=None, edge_newton=None):
     """One run in this process; returns a dict (called in a child process). ``second_order_correction``,
     ``edge_newton``: the solver options of those names (``SolverOptions``)."""
     import tracemalloc
@@ -424,8 +424,8 @@ def main(argv=None):
         return setup_table(args)
     if args.single:
         print(json.dumps(single(args.single[0], int(args.single[1]), time_budget=args.time_budget,
-                                trace=not args.no_trace, second_order_correction=args.second_order_correction,
-                                edge_newton=args.edge_newton)))
+                                trace=not args.no_trace, second_order_correction=args.second_order_correction or None,
+                                edge_newton=args.edge_newton or None)))
         return
     if args.million:
         return million(args)

@@ -21,6 +21,7 @@ bound is 1 or more, when it certifies nothing). "Stops falling" means: no halvin
 low of the energy minus the load work by more than the round-off forces can do along the step actually taken.
 """
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -72,6 +73,17 @@ CONTACT_SECOND_ORDER = True
 # plectoneme lower on the rod, whose later steps then ran into the clamp (docs/contact.md section 9.6)
 CONTACT_ARC_EVERY_FRACTION = True
 CONTACT_ARC_FROM_CONTACT_START = True
+# SolverOptions(edge_newton=None), the default: edge-coordinate Newton steps with the second-order correction for an
+# inextensible rod the edge path applies to (edge_coordinates.edge_eligible) once the node-coordinate Newton matrix's
+# condition c (L/h)^4 (penalty c A1/h^3 against a smooth bending mode's A1 h/L^4) exceeds this. Measured on ring
+# torsion (docs/scaling.md, "Stop 27"): node-coordinate steps lose 2e-3 of their accuracy at c (L/h)^4 = 8e14
+# (n = 3,000) and all of it at 1e17 (3x10^4), where the default path stalled and restarted; with both options it
+# reaches the round-off floor in 6 iterations at 3x10^4 and 10^5
+EDGE_NEWTON_CONDITION = 1e14
+# a measurement hook (tools/ring_trace.py): None, or a callable TRACE(kind, **values) called once per iteration
+# ("iteration": residual, strain, energy, dt), per accepted step ("step": fraction a, line-search halvings, arc
+# used) and per multiplier update ("multipliers"). Off in every solve unless a tool sets it.
+TRACE = None
 
 
 def second_order_correction(system, state, delta, resolve):
@@ -114,6 +126,25 @@ def _edge_resolve_q(system, edge, rhs):
     return expand(system, c)
 
 
+def effective_options(system, options):
+    """``options`` with ``edge_newton`` and ``second_order_correction`` decided where they are None (automatic):
+    both on for an inextensible rod the edge path applies to whose node-coordinate Newton matrix has condition
+    c (L/h)^4 above EDGE_NEWTON_CONDITION, off otherwise. Options set to True or False are kept."""
+    if options.edge_newton is not None and options.second_order_correction is not None:
+        return options
+    auto = False
+    rod = system.rod
+    if system.parts is None and not system.terms and rod.inextensible and rod.n_edges > 0:
+        from .edge_coordinates import edge_eligible
+
+        l = np.asarray(rod.l_bar)
+        condition = options.inextensible_penalty * (float(l.sum()) / float(l.min())) ** 4
+        auto = condition > EDGE_NEWTON_CONDITION and edge_eligible(system)
+    edge = auto if options.edge_newton is None else options.edge_newton
+    soc = (auto and edge) if options.second_order_correction is None else options.second_order_correction
+    return replace(options, edge_newton=edge, second_order_correction=soc)
+
+
 def shrink(dt, options):
     """The next pseudo-time step after a failed one: a tenth, or, from Newton's method (dt at its cap), back to
     the cautious start ``dt0``."""
@@ -127,6 +158,7 @@ def solve_implicit(system, state, options, progress=None, recorder=None):
     (Newton steps from far away can land where round-off hides every descent direction of the soft modes)
     the solve restarts once from the initial state with the cautious pseudo-time start, within what is left
     of the iteration and time budgets."""
+    options = effective_options(system, options)
     # the start is kept only for the edge-coordinate fallback below (a state is 136 MB at 10^6 edges, issue 17)
     start = state.copy() if getattr(options, "edge_newton", False) else None
     t_start = time.perf_counter()
@@ -269,6 +301,10 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 break
             last_good.copy_from(state)
             history.append(residual)
+            if TRACE is not None:
+                TRACE("iteration", it=it, residual=residual, strain=strain, energy=energy, potential=potential,
+                      dt=dt, constraint=constraint_residual(system, state, scales) if rod.inextensible else 0.0,
+                      since_best=since_best)
             if recorder is not None and it % options.record_every == 0:
                 recorder.log_step(it, state, residual, energy_terms(system, state))
             if progress is not None:
@@ -314,8 +350,13 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
                 if residual <= max(options.tol, 0.1 * constraint_residual(system, state, scales)):
                     # near equilibrium a strain that will not fall calls for a larger penalty (see
                     # multiplier_update); during a transient it only means the rod is still moving
+                    lam_before = state.lam.copy() if TRACE is not None else None
                     last_update = multiplier_update(system, state,
                                                            last_update if residual < 1e-4 else None)
+                    if TRACE is not None:
+                        TRACE("multipliers", it=it, dlam=float(np.abs(state.lam - lam_before).max()),
+                              lam=float(np.abs(state.lam).max()), k=float(system.plan.k_stretch.max()),
+                              g=float(np.abs(last_update).max()))
                     best, since_best = np.inf, 0
                     just_updated = True   # let Newton answer before the next update
                     continue
@@ -498,6 +539,8 @@ def _relax(system, state, options, dt, progress=None, recorder=None, it=0, t_sta
             potential += change
             descent = max(-change, 0.0)
             noise = 0.0 if round_off is None else dot_difference(round_off, trial.q, state.q, True)
+            if TRACE is not None:
+                TRACE("step", it=it, a=a, ls=ls, arc=arc is not None, attempts=_attempt, change=change, dt=dt)
             state.copy_from(trial)
             total_descent += descent
             if system.contact_coo and a == 1.0 and dt >= options.dt_max and residual < exact_below:

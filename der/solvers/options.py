@@ -34,13 +34,17 @@ class SolverOptions:
         node-coordinate steps as usual (``result.linear_solves["edge"]`` counts the edge steps). Each step q = T z
         is applied as a compensated pair (the edges' prefix sums with TwoSum), so that the edges of the step keep
         their own rounding. With ``second_order_correction`` the correction is solved with the edge factors.
-        Default False.
+        Default None (automatic): on, with ``second_order_correction``, for an inextensible rod of that kind whose
+        node-coordinate Newton matrix is beyond double precision, c (L/h)^4 > 1e14 (``inextensible_penalty`` c,
+        the longest-to-shortest edge ratio L/h; der.solvers.implicit.EDGE_NEWTON_CONDITION): ring torsion from
+        n ~ 1,800 edges at c = 10 (docs/scaling.md, "Stop 27"); off otherwise. False or True forces it.
     line_search_steps, armijo : backtracking halvings per pseudo-time step and the sufficient-decrease factor.
     second_order_correction : implicit solver, rods with a stretching term, no contact: when the line search
         refuses a full step, correct it for the elongation that the straight-line step adds to the edges it
         turns beyond its linearisation (the chord error |d_perp|^2 / 2h, priced by the axial stiffness: the
         Maratos effect that stalls Newton's method on a fine inextensible ring), solved with the same
-        factorisation, and search along the arc q + a delta + a^2 c. Off by default (docs/scaling.md). Scenes with
+        factorisation, and search along the arc q + a delta + a^2 c. Default None: on where ``edge_newton`` is
+        turned on automatically (above), off otherwise (docs/scaling.md); False or True forces it. Scenes with
         self-contact (segment barrier) always correct a refused step this way, with the contact solve's factors and
         each arc proven free of passage (der/solvers/implicit.py CONTACT_SECOND_ORDER; docs/contact.md 9.5).
     dt : explicit time step (physical time for the rod's line density rho_A); None picks ``safety / omega_max``,
@@ -86,12 +90,12 @@ class SolverOptions:
     time_budget: float = math.inf
     dt0: float = 1.0
     newton_first: bool = True
-    edge_newton: bool = False
+    edge_newton: bool | None = None
     dt_max: float = 1e30
     dt_growth: float = 10.0
     line_search_steps: int = 10
     armijo: float = 1e-4
-    second_order_correction: bool = False
+    second_order_correction: bool | None = None
     dt: float | None = None
     safety: float = 0.9
     fire_n_min: int = 5

@@ -109,6 +109,12 @@ def closed_writhe(x, L):
     return float(dg._writhe(np.ascontiguousarray(np.vstack([x, closure]))))
 
 
+def bottom_tilt(x):
+    """Angle (rad) between the bottom clamp's end edge x[1] - x[0] and the z axis."""
+    e = x[1] - x[0]
+    return float(np.arctan2(np.hypot(e[0], e[1]), e[2]))
+
+
 def run(p, solver):
     """The continuation in N (der.continuation, natural parameter, fixed steps of --turns / --sweep, each solve
     warm-started from the last state, the lateral imperfection added to each start until the first contact)."""
@@ -117,6 +123,10 @@ def run(p, solver):
     xi = rod.rest_q.reshape(-1, 4)[:, 2] / p.L
     bump = np.zeros((rod.n_nodes, 3))
     bump[:, 0] = p.perturb * p.L * np.sin(np.pi * np.clip(xi, 0, 1))
+    # not on the nodes the clamps hold (each clamp holds its end edge where the start state has it, so a
+    # nudged node 1 would tilt the bottom clamp, by a little more at every nudged step)
+    bump[:2] = 0.0
+    bump[-2:] = 0.0
 
     def scene_of(N):
         return der.Scene(rod, loads=[der.end_force([0.0, 0.0, p.force])],
@@ -151,6 +161,8 @@ def run(p, solver):
         "twist": lambda scene, st: dg.total_twist(rod, st) / (2 * np.pi),
         "writhe": lambda scene, st: closed_writhe(st.positions, p.L),
         "min_distance": lambda scene, st: contact_of(scene, st)["min_distance"],
+        # the bottom clamp's end edge against the z axis (rad): 0 to round-off, the clamp is not tilted
+        "clamp_tilt": lambda scene, st: bottom_tilt(st.positions),
         "contacts": contacts,
     }
     branch = der.continuation(scene_of, 0.0, p.turns, parameter="turns", method="natural", dp=p.turns / p.sweep,
@@ -160,7 +172,7 @@ def run(p, solver):
                               max_steps=8 * p.sweep, progress=False, keep_states=False, solve=solver.solve)
     steps = []
     for pt in branch.points[1:]:
-        row = {k: pt[k] for k in ("turns", "extension", "torque", "twist", "writhe", "min_distance")}
+        row = {k: pt[k] for k in ("turns", "extension", "torque", "twist", "writhe", "min_distance", "clamp_tilt")}
         row["linking_number"] = row["twist"] + row["writhe"]
         row.update(contacts=int(pt["contacts"]), converged=True, iterations=pt["newton_iterations"],
                    runtime_s=pt["step_time"])
@@ -182,6 +194,8 @@ def summarise(p, steps):
                                               "min_distance", "contacts")}
     out["converged"] = all(s["converged"] for s in steps) and len(steps) == p.sweep
     out["lk_error_max"] = float(np.max(np.abs(np.array(out["linking_number"]) - N)))
+    if all("clamp_tilt" in s for s in steps):
+        out["clamp_tilt_max"] = float(max(s["clamp_tilt"] for s in steps))
     # measured: buckling = the first step with a self-contact or with the torque below the last one
     buckled = [k for k in range(len(steps)) if steps[k]["contacts"] > 0 or (k and torque[k] < torque[k - 1] - 1e-9)]
     kb = buckled[0] if buckled else None

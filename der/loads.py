@@ -9,7 +9,14 @@ the normal part as a couple of node forces ``+-(tau x t_j) / |e_j|`` on the edge
 
 Sign conventions: a positive moment about t over-twists the rod (right-handed about t, the direction of
 increasing arc length). Densities are per unit *rest* length.
+
+Each load record (a frozen dataclass, registered with ``@register``) answers the ``Load`` protocol itself: its
+check against the rod, its share of the plan's arrays (``add_to`` a ``LoadSums``), its scale, its net dead force
+and torque, its dead direction, whether it turns with the sections, whether it keeps a ring's sliding symmetry.
+The Scene, ``make_plan``, the solvers and the stability analysis only ask these (no chain of isinstance tests):
+a new load type is one class here.
 """
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,17 +26,200 @@ from . import validate
 from .stencils import edge_dofs, scatter_band
 
 
+# ---------------------------------------------------------------------------------------------
+# the load protocol: every load record answers these questions itself
+# ---------------------------------------------------------------------------------------------
+
+LOAD_TYPES = []   # the registered load records, in the order the Scene's error names their constructors
+
+
+def register(cls):
+    """Class decorator: make ``cls`` a load the Scene accepts (its ``constructor`` is named in the Scene's error
+    for an unknown load). A new load type is one class here, with this line."""
+    if not (isinstance(cls, type) and issubclass(cls, Load) and isinstance(getattr(cls, "constructor", None), str)):
+        raise TypeError(f"der.loads.register: {cls!r} must be a subclass of der.loads.Load with a `constructor` "
+                        "name (the der function that makes it)")
+    LOAD_TYPES.append(cls)
+    return cls
+
+
+def unknown_load_message(load):
+    """The Scene's error for ``load`` that is no registered load record: it names the constructors."""
+    names = [f"der.{cls.constructor}" for cls in LOAD_TYPES]
+    return (f"der.Scene: loads: unknown load {load!r}; use {', '.join(names[:-1])} or {names[-1]}")
+
+
+def check_load(rod, load):
+    """Check ``load`` against ``rod`` before any work: a ValueError naming the constructors for an object that is
+    no load record, else the record's own ``check(rod)``."""
+    if not isinstance(load, tuple(LOAD_TYPES)):
+        raise ValueError(unknown_load_message(load))
+    load.check(rod)
+
+
+class LoadSums:
+    """The loads of a scene summed into the arrays of a plan (``scene.make_plan``): each record's ``add_to`` adds
+    its share, in the order of ``scene.loads``.
+
+    - ``nodal`` (n_nodes, 3): dead forces per node (force units, global frame), lumped; ``has_nodal``.
+    - ``theta`` (n_edges,): moments about each edge's current tangent (force * length; positive over-twists);
+      ``has_theta``.
+    - ``dead_edges``, ``dead_torques``: dead torque vectors (force * length, global frame) on edges' frames.
+    - ``follower_density`` (3,): the follower force per unit rest length along (m1, m2, t); ``has_follower``.
+    - ``follower_torque_edges``, ``follower_torques``: follower torques (T1, T2, Tt) along an edge's current
+      material frame (m1, m2, t).
+    """
+
+    def __init__(self, rod):
+        self.nodal = np.zeros((rod.n_nodes, 3))
+        self.theta = np.zeros(rod.n_edges)
+        self.has_nodal = self.has_theta = False
+        self.dead_edges, self.dead_torques = [], []
+        self.follower_density = np.zeros(3)
+        self.has_follower = False
+        self.follower_torque_edges, self.follower_torques = [], []
+
+
+def _end_edge(rod, end):
+    """The index of the end edge at ``end`` ("start" or "end"); a ValueError for a ring or another end."""
+    from .constraints import end_index     # (der.constraints imports this module)
+
+    return end_index(rod, end)[2]
+
+
+def _norm(v):
+    """|v| without overflow (``solvers.system.safe_norm``)."""
+    from .solvers.system import safe_norm
+
+    return safe_norm(v)
+
+
+class Load(ABC):
+    """What every load record answers (the Scene's check, ``make_plan``, the solvers' load scale and equilibrium
+    check, the stability analysis ask nothing else). Subclasses are frozen dataclasses, registered with
+    ``@register``; a class that leaves one of these out cannot be instantiated."""
+
+    constructor = None   # the der.<constructor> that makes the record
+
+    @abstractmethod
+    def check(self, rod):
+        """ValueError (or TypeError) if the record does not fit ``rod`` or holds values its constructor refuses
+        (records built by hand): node or edge out of range, an end of a ring, a non-finite value."""
+
+    @abstractmethod
+    def add_to(self, sums, rod):
+        """Add the load's generalized force to ``sums`` (a ``LoadSums`` of ``rod``): its nodal forces, theta
+        moments, dead torques, follower force density or follower torques."""
+
+    @abstractmethod
+    def scale(self, L):
+        """(force, moment): the size of the applied force (force units; a density times the rod length ``L``)
+        and of the applied moment (force * length; a moment density times ``L``), for the residual's load scale
+        (``solvers.system.applied_scales``). Non-negative; inf or nan if the record's values overflow."""
+
+    @abstractmethod
+    def net(self, rod):
+        """(force, torque, follower): the net dead force on ``rod`` (a 3-vector in the global frame, the total its
+        nodes receive; None if the load has none), its dead torque (a 3-vector, force * length; None if none),
+        and whether it is a follower load (its moment on the rod turns with the configuration). Used to refuse a
+        scene without static equilibrium (``solvers.system.check_equilibrium_exists``)."""
+
+    @abstractmethod
+    def dead_vector(self):
+        """The fixed global vector of a dead load (force, force per length or torque; not normalised), which
+        breaks the rigid rotations about any other axis; None for a follower load."""
+
+    @abstractmethod
+    def turns_with_sections(self):
+        """True if the load depends on the sections' angles (it has a component along a material director m1 or
+        m2): then a uniform turn of every section (theta + c) is no symmetry of the scene."""
+
+    @abstractmethod
+    def keeps_ring_sliding(self):
+        """True if a uniform free ring sliding along its centreline (``stability.sliding_mode``) stays a symmetry
+        under this load: the load is uniform per unit rest length and does no work in that sliding."""
+
+
+class _DeadForce(Load):
+    """A dead force ``force`` (3-vector, force units, global frame) concentrated at one place."""
+
+    def scale(self, L):
+        return _norm(self.force), 0.0
+
+    def net(self, rod):
+        return np.asarray(self.force, float), None, False
+
+    def dead_vector(self):
+        return np.asarray(self.force, float)
+
+    def turns_with_sections(self):
+        return False
+
+    def keeps_ring_sliding(self):
+        return False
+
+
+class _Torque(Load):
+    """A torque on one edge's material frame: dead (``follower=False``: ``torque`` a 3-vector, force * length,
+    global frame) or follower (``follower=True``: about the edge's current frame)."""
+
+    def scale(self, L):
+        return 0.0, (abs(float(self.torque)) if np.ndim(self.torque) == 0 else _norm(self.torque))
+
+    def net(self, rod):
+        if self.follower:
+            return None, None, True          # follower moments turn with the rod
+        return None, np.asarray(self.torque, float), False
+
+    def dead_vector(self):
+        return None if self.follower else np.asarray(self.torque, float)
+
+    def turns_with_sections(self):
+        return False
+
+    def keeps_ring_sliding(self):
+        return False
+
+    def _add_on_edge(self, sums, j):
+        """Edge ``j`` carries the torque: a moment about its tangent (scalar follower), a dead torque vector, or
+        a follower torque along its material frame (m1, m2, t)."""
+        if self.follower and np.ndim(self.torque) == 1:
+            sums.follower_torque_edges.append(j)
+            sums.follower_torques.append(self.torque)
+        elif self.follower:
+            sums.theta[j] += self.torque
+            sums.has_theta = True
+        else:
+            sums.dead_edges.append(j)
+            sums.dead_torques.append(self.torque)
+
+
+@register
 @dataclass(frozen=True)
-class PointForce:
+class PointForce(_DeadForce):
     """A dead force ``force`` (3-vector, force units) on node ``node`` (negative indices count from the end).
 
     Made by ``der.point_force``."""
     node: int
     force: tuple
 
+    constructor = "point_force"
 
+    def check(self, rod):
+        node = validate.integer(self.node, "der.point_force: node", "an integer node index")
+        if not -rod.n_nodes <= node < rod.n_nodes:
+            raise ValueError(f"point force on node {node}: out of range for {rod.n_nodes} nodes "
+                             f"(allowed: {-rod.n_nodes} ... {rod.n_nodes - 1})")
+        validate.vector3(self.force, "der.point_force: force")
+
+    def add_to(self, sums, rod):
+        sums.nodal[self.node % rod.n_nodes] += self.force
+        sums.has_nodal = True
+
+
+@register
 @dataclass(frozen=True)
-class EndForce:
+class EndForce(_DeadForce):
     """A dead force ``force`` (3-vector) on the end cross-section ``end`` ("start" or "end").
 
     It acts at the end edge's midpoint -- the rod's end, xi = 0 or L -- as half the force on each of its nodes.
@@ -38,17 +228,56 @@ class EndForce:
     end: str
     force: tuple
 
+    constructor = "end_force"
 
+    def check(self, rod):
+        _end_edge(rod, self.end)
+        validate.vector3(self.force, "der.end_force: force")
+
+    def add_to(self, sums, rod):
+        j = _end_edge(rod, self.end)
+        for k in rod.edge_nodes[j]:
+            sums.nodal[k] += 0.5 * np.asarray(self.force)
+        sums.has_nodal = True
+
+
+@register
 @dataclass(frozen=True)
-class DistributedForce:
+class DistributedForce(Load):
     """A dead force per unit rest length ``density`` (3-vector), lumped to nodes by Voronoi length.
 
     Made by ``der.distributed_force``."""
     density: tuple
 
+    constructor = "distributed_force"
 
+    def check(self, rod):
+        validate.vector3(self.density, "der.distributed_force: density")
+
+    def add_to(self, sums, rod):
+        sums.nodal += rod.node_weights()[:, None] * np.asarray(self.density)[None, :]
+        sums.has_nodal = True
+
+    def scale(self, L):
+        return _norm(self.density) * L, 0.0
+
+    def net(self, rod):
+        # the total the rod receives: the density times the length its nodes stand for (the lumping of add_to)
+        return np.asarray(self.density, float) * float(rod.node_weights().sum()), None, False
+
+    def dead_vector(self):
+        return np.asarray(self.density, float)
+
+    def turns_with_sections(self):
+        return False
+
+    def keeps_ring_sliding(self):
+        return True
+
+
+@register
 @dataclass(frozen=True)
-class EndTorque:
+class EndTorque(_Torque):
     """A torque on the end cross-section at ``end`` ("start" or "end").
 
     ``follower=False``: a dead torque, ``torque`` a fixed 3-vector (force * length).
@@ -59,17 +288,55 @@ class EndTorque:
     torque: object
     follower: bool = False
 
+    constructor = "end_torque"
 
+    def check(self, rod):
+        _end_edge(rod, self.end)
+        if self.follower:
+            validate.finite_number(self.torque, "der.end_torque: torque (follower=True: a scalar)")
+        else:
+            validate.vector3(self.torque, "der.end_torque: torque: dead end torque")
+
+    def add_to(self, sums, rod):
+        self._add_on_edge(sums, _end_edge(rod, self.end))
+
+
+@register
 @dataclass(frozen=True)
-class TwistingMoment:
+class TwistingMoment(Load):
     """A distributed moment ``density`` (force * length / length) about the current tangent (a follower load).
 
     Made by ``der.twisting_moment``."""
     density: float
 
+    constructor = "twisting_moment"
 
+    def check(self, rod):
+        validate.finite_number(self.density, "der.twisting_moment: density")
+
+    def add_to(self, sums, rod):
+        sums.theta += self.density * rod.edge_weights()
+        sums.has_theta = True
+
+    def scale(self, L):
+        return 0.0, abs(self.density) * L
+
+    def net(self, rod):
+        return None, None, True
+
+    def dead_vector(self):
+        return None
+
+    def turns_with_sections(self):
+        return False
+
+    def keeps_ring_sliding(self):
+        return True
+
+
+@register
 @dataclass(frozen=True)
-class PointTorque:
+class PointTorque(_Torque):
     """A torque on the material frame of edge ``edge`` (any edge, interior ones included).
 
     ``follower=False``: a dead torque, ``torque`` a fixed 3-vector (force * length).
@@ -79,13 +346,57 @@ class PointTorque:
     torque: object
     follower: bool = False
 
+    constructor = "point_torque"
 
+    def check(self, rod):
+        edge = validate.integer(self.edge, "der.point_torque: edge", "an integer edge index")
+        if not -rod.n_edges <= edge < rod.n_edges:
+            raise ValueError(f"point torque on edge {edge}: out of range for {rod.n_edges} edges "
+                             f"(allowed: {-rod.n_edges} ... {rod.n_edges - 1})")
+        if self.follower and np.ndim(self.torque) == 0:
+            validate.finite_number(self.torque, "der.point_torque: torque (follower=True: a scalar)")
+        else:
+            validate.vector3(self.torque, "der.point_torque: torque")
+
+    def add_to(self, sums, rod):
+        self._add_on_edge(sums, self.edge % rod.n_edges)
+
+    def turns_with_sections(self):
+        return bool(self.follower and np.ndim(self.torque) == 1
+                    and (self.torque[0] != 0.0 or self.torque[1] != 0.0))
+
+
+@register
 @dataclass(frozen=True)
-class FollowerForce:
+class FollowerForce(Load):
     """A force per unit rest length that turns with the cross-section: ``density`` = (f1, f2, ft), its
     components along the material directors m1, m2 and the tangent t of each edge. Made by
     ``der.follower_force``."""
     density: tuple
+
+    constructor = "follower_force"
+
+    def check(self, rod):
+        validate.vector3(self.density, "der.follower_force: density")
+
+    def add_to(self, sums, rod):
+        sums.follower_density += np.asarray(self.density, float)
+        sums.has_follower = True
+
+    def scale(self, L):
+        return _norm(self.density) * L, 0.0
+
+    def net(self, rod):
+        return None, None, True
+
+    def dead_vector(self):
+        return None
+
+    def turns_with_sections(self):
+        return bool(self.density[0] != 0.0 or self.density[1] != 0.0)
+
+    def keeps_ring_sliding(self):
+        return False
 
 
 ENDS = ("start", "end")

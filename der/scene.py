@@ -11,7 +11,6 @@ import numpy as np
 from numba import njit
 
 from . import constraints as _constraints
-from . import validate
 from .energies.bend import bend_energy, bend_gradient, bend_hessian
 from .energies.stretch import stretch_energy, stretch_gradient, stretch_hessian
 from .energies.twist import twist_energy, twist_gradient, twist_hessian
@@ -19,8 +18,8 @@ from .energies.vertex import bend_twist_hessian, stretch_bend_twist_gradient, st
 from .geometry import add_transport_jacobian, edge_array_into, edge_frames
 from .linalg import zero_band
 from .loads import (
-    DistributedForce, EndForce, EndTorque, FollowerForce, PointForce, PointTorque, TwistingMoment, add_dead_torques,
-    add_follower_forces, add_follower_torques, add_nodal_forces, add_theta_moments,
+    LoadSums, add_dead_torques, add_follower_forces, add_follower_torques, add_nodal_forces, add_theta_moments,
+    check_load,
 )
 from .rod import Rod
 
@@ -150,41 +149,9 @@ class Scene:
 
 def _check_load(rod, load):
     """Check a load record against the rod, before any work (the constructors check the values themselves;
-    this catches records built by hand and what needs the rod: node ranges, ends of a ring)."""
-    if isinstance(load, PointForce):
-        node = validate.integer(load.node, "der.point_force: node", "an integer node index")
-        if not -rod.n_nodes <= node < rod.n_nodes:
-            raise ValueError(f"point force on node {node}: out of range for {rod.n_nodes} nodes "
-                             f"(allowed: {-rod.n_nodes} ... {rod.n_nodes - 1})")
-        validate.vector3(load.force, "der.point_force: force")
-    elif isinstance(load, EndForce):
-        _constraints.end_index(rod, load.end)
-        validate.vector3(load.force, "der.end_force: force")
-    elif isinstance(load, DistributedForce):
-        validate.vector3(load.density, "der.distributed_force: density")
-    elif isinstance(load, EndTorque):
-        _constraints.end_index(rod, load.end)
-        if load.follower:
-            validate.finite_number(load.torque, "der.end_torque: torque (follower=True: a scalar)")
-        else:
-            validate.vector3(load.torque, "der.end_torque: torque: dead end torque")
-    elif isinstance(load, TwistingMoment):
-        validate.finite_number(load.density, "der.twisting_moment: density")
-    elif isinstance(load, PointTorque):
-        edge = validate.integer(load.edge, "der.point_torque: edge", "an integer edge index")
-        if not -rod.n_edges <= edge < rod.n_edges:
-            raise ValueError(f"point torque on edge {edge}: out of range for {rod.n_edges} edges "
-                             f"(allowed: {-rod.n_edges} ... {rod.n_edges - 1})")
-        if load.follower and np.ndim(load.torque) == 0:
-            validate.finite_number(load.torque, "der.point_torque: torque (follower=True: a scalar)")
-        else:
-            validate.vector3(load.torque, "der.point_torque: torque")
-    elif isinstance(load, FollowerForce):
-        validate.vector3(load.density, "der.follower_force: density")
-    else:
-        raise ValueError(f"der.Scene: loads: unknown load {load!r}; use der.point_force, der.end_force, "
-                         "der.distributed_force, der.end_torque, der.twisting_moment, der.point_torque or "
-                         "der.follower_force")
+    this catches records built by hand and what needs the rod: node ranges, ends of a ring). An object that is
+    no load record: a ValueError naming the constructors (``loads.check_load``)."""
+    check_load(rod, load)
 
 
 Plan = namedtuple("Plan", [
@@ -207,51 +174,9 @@ Plan = namedtuple("Plan", [
 def make_plan(scene, k_stretch):
     """Flatten a scene for the kernels. ``k_stretch`` (per edge) is the axial penalty the solver uses."""
     rod = scene.rod
-    nodal = np.zeros((rod.n_nodes, 3))
-    theta = np.zeros(rod.n_edges)
-    has_nodal = has_theta = False
-    t_edges, t_vecs = [], []
-    follower = np.zeros(3)
-    has_follower = False
-    ft_edges, ft_vecs = [], []
-    node_len = rod.node_weights()
-    for load in scene.loads:
-        if isinstance(load, PointForce):
-            nodal[load.node % rod.n_nodes] += load.force
-            has_nodal = True
-        elif isinstance(load, EndForce):
-            _, _, j = _constraints.end_index(rod, load.end)
-            for k in rod.edge_nodes[j]:
-                nodal[k] += 0.5 * np.asarray(load.force)
-            has_nodal = True
-        elif isinstance(load, DistributedForce):
-            nodal += node_len[:, None] * np.asarray(load.density)[None, :]
-            has_nodal = True
-        elif isinstance(load, EndTorque):
-            _, _, j = _constraints.end_index(rod, load.end)
-            if load.follower:
-                theta[j] += load.torque
-                has_theta = True
-            else:
-                t_edges.append(j)
-                t_vecs.append(load.torque)
-        elif isinstance(load, TwistingMoment):
-            theta += load.density * rod.edge_weights()
-            has_theta = True
-        elif isinstance(load, PointTorque):
-            j = load.edge % rod.n_edges
-            if load.follower and np.ndim(load.torque) == 1:
-                ft_edges.append(j)
-                ft_vecs.append(load.torque)
-            elif load.follower:
-                theta[j] += load.torque
-                has_theta = True
-            else:
-                t_edges.append(j)
-                t_vecs.append(load.torque)
-        elif isinstance(load, FollowerForce):
-            follower += np.asarray(load.density, float)
-            has_follower = True
+    sums = LoadSums(rod)
+    for load in scene.loads:      # each record adds its share, in the scene's order (the sums' round-off)
+        load.add_to(sums, rod)
     # follower forces: half of each edge's rest length to each of its nodes, none to the outer nodes of an open
     # rod (the outer halves of the end edges lie outside [0, L]): the lumping of Rod.node_weights
     w_first = 0.5 * rod.l_bar.copy()
@@ -268,11 +193,13 @@ def make_plan(scene, k_stretch):
         rod.l_bar, rod.voronoi, rod.natural_curvature_edges().reshape(-1, 4), rod.twist_bar, rod.weld,
         rod.kernel_bending(), rod.kernel_twisting(),   # floats for a uniform isotropic rod (energies.stiffness)
         np.array(k_stretch, dtype=float),        # a copy: the solver may raise the penalty in place
-        has_nodal, nodal, has_theta, theta,
-        len(t_edges) > 0, np.array(t_edges, dtype=np.int64), np.array(t_vecs, dtype=float).reshape(-1, 3),
+        sums.has_nodal, sums.nodal, sums.has_theta, sums.theta,
+        len(sums.dead_edges) > 0, np.array(sums.dead_edges, dtype=np.int64),
+        np.array(sums.dead_torques, dtype=float).reshape(-1, 3),
         np.zeros(len(COUNTER_NAMES), dtype=np.int64),
-        has_follower, follower, w_first, w_second,
-        len(ft_edges) > 0, np.array(ft_edges, dtype=np.int64), np.array(ft_vecs, dtype=float).reshape(-1, 3),
+        sums.has_follower, sums.follower_density, w_first, w_second,
+        len(sums.follower_torque_edges) > 0, np.array(sums.follower_torque_edges, dtype=np.int64),
+        np.array(sums.follower_torques, dtype=float).reshape(-1, 3),
         work_ed[:, 10:16], work_ed, np.empty(rod.n_edges),
     )
 

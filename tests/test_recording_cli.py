@@ -209,9 +209,13 @@ def test_scenario_not_converged_exits_3_with_json():
 
 def test_ctrl_c_leaves_a_valid_recording(tmp_path):
     path = tmp_path / "sigint.rrd"
+    # the child takes Ctrl-C as a terminal would deliver it, whatever this process inherited: a test run started
+    # in the background of a non-interactive shell (`bash .ci/run &`) ignores SIGINT, its children inherit the
+    # ignore, and Python then installs no KeyboardInterrupt (the solve ran to its end and exited 0)
     proc = subprocess.Popen([sys.executable, str(ROOT / "scenarios" / "straight_twist.py"), "--solver", "explicit",
                              "--n", "3000", "--tol", "1e-12", "--rrd", str(path), "--json"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     # interrupt once the solver reports progress (a line per second on stderr), i.e. inside the solve. Not
     # before: a Ctrl-C while a fresh clone compiles (der.warmup, minutes on a busy machine) ends the run before
     # any recording exists (test_ctrl_c_while_the_kernels_compile_exits_3_without_a_recording); this test's old

@@ -45,15 +45,84 @@ def welded(m1, m2, psi):
     return vadd(vscale(c, m1), vscale(s, m2)), vsub(vscale(c, m2), vscale(s, m1))
 
 
+# ---- the formulas of one vertex, one home each: called by the kernels below and by the fused vertex pass
+# (``energies.vertex._bend_twist_local``), which then computes the same floating-point operations in the same
+# order (the solver's Newton paths follow round-off; ``tools/kernel_fingerprint.py`` checks it bitwise).
+# Editing one of them: numba's cache keys a kernel on its own file only, so also touch energies/vertex.py (its
+# fused kernels inline these, and scene.evaluate calls them) or clear the caches, else they run stale.
+
+
+@njit(cache=True, inline="always")
+def _vertex_curvatures(ed, vertex_edges, weld, v):
+    """The frames of vertex v's two edges (edge f's turned by the weld), its curvature binormal and material
+    curvatures: ``(te, le, m1e, m2e, tf, lf, m1f, m2f, kb, k1e, k2e, k1f, k2f)`` with ``k1_j = kb . m2_j``,
+    ``k2_j = -kb . m1_j``. The weld leaves d/dtheta_f unchanged: m1f' = m2f, m2f' = -m1f."""
+    te, le, m1e, m2e = edge_vectors(ed, vertex_edges[v, 0])
+    tf, lf, m1f, m2f = edge_vectors(ed, vertex_edges[v, 1])
+    m1f, m2f = welded(m1f, m2f, weld[v])
+    kb = curvature_binormal_of(ed, vertex_edges[v, 0], vertex_edges[v, 1])
+    k1e = vdot(kb, m2e)
+    k2e = -vdot(kb, m1e)
+    k1f = vdot(kb, m2f)
+    k2f = -vdot(kb, m1f)
+    return te, le, m1e, m2e, tf, lf, m1f, m2f, kb, k1e, k2e, k1f, k2f
+
+
+@njit(cache=True, inline="always")
+def _curvature_residuals(k1e, k2e, k1f, k2f, kappa_bar, v):
+    """The material curvatures of vertex v less their natural values ``kappa_bar[v]``."""
+    return k1e - kappa_bar[v, 0], k2e - kappa_bar[v, 1], k1f - kappa_bar[v, 2], k2f - kappa_bar[v, 3]
+
+
+@njit(cache=True, inline="always")
+def _bend_weights_energy(b1, b2, r1e, r2e, r1f, r2f):
+    """``(w1, w2, E_v)``: E_v = 1/2 sum_c w_c r_c^2 with w = b / 2 (the two edge sides share the vertex's
+    Voronoi cell)."""
+    w1 = 0.5 * b1
+    w2 = 0.5 * b2
+    return w1, w2, 0.5 * (w1 * (r1e * r1e + r1f * r1f) + w2 * (r2e * r2e + r2f * r2f))
+
+
+@njit(cache=True, inline="always")
+def _bend_gradient_of(te, le, m1e, m2e, tf, lf, m1f, m2f, k1e, k2e, k1f, k2f, r1e, r2e, r1f, r2f, w1, w2, g8):
+    """``g8`` <- the bending gradient of a vertex in (e, f, theta_e, theta_f) from ``_vertex_curvatures``,
+    ``_curvature_residuals`` and ``_bend_weights_energy``; returns what its Hessian reuses: ``(s1e, s2e, s1f,
+    s2f, ichi, tt, Ue, Uf, K, dd, tf x dd, te x dd)`` with s_c = w_c r_c, ichi = 1 / chi, tt = (te + tf) / chi,
+    U = sum_c s_c u_c (edge e and edge f parts), K = sum_c s_c k_c and dd = 2 U / chi.
+
+    Every component is ``kb . u`` with ``u`` one material vector of one edge (``m2_e``, ``-m1_e``, ``m2_f``,
+    ``-m1_f``): d(kb . u)/de = (-(kb . u) tt + 2 tf x u / chi) / |e|, d/df = (-(kb . u) tt - 2 te x u / chi) / |f|
+    (a material vector of either edge turns with its own tangent only, normal to kb); d k1_j / dtheta_j = k2_j,
+    d k2_j / dtheta_j = -k1_j. Weighted by s_c and summed, the edge parts need only K and U."""
+    s1e = w1 * r1e
+    s2e = w2 * r2e
+    s1f = w1 * r1f
+    s2f = w2 * r2f
+    chi = 1.0 + vdot(te, tf)
+    ichi = 1.0 / chi
+    tt = vscale(ichi, vadd(te, tf))
+    Ue = vsub(vscale(s1e, m2e), vscale(s2e, m1e))
+    Uf = vsub(vscale(s1f, m2f), vscale(s2f, m1f))
+    K = s1e * k1e + s2e * k2e + s1f * k1f + s2f * k2f
+    dd = vscale(2.0 * ichi, vadd(Ue, Uf))
+    tf_x_dd = vcross(tf, dd)
+    te_x_dd = vcross(te, dd)
+    ge = vscale(1.0 / le, vadd(vscale(-K, tt), tf_x_dd))
+    gf = vscale(1.0 / lf, vsub(vscale(-K, tt), te_x_dd))
+    for i in range(3):
+        g8[i] = ge[i]
+        g8[3 + i] = gf[i]
+    g8[6] = s1e * k2e - s2e * k1e
+    g8[7] = s1f * k2f - s2f * k1f
+    return s1e, s2e, s1f, s2f, ichi, tt, Ue, Uf, K, dd, tf_x_dd, te_x_dd
+
+
 @njit(cache=True)
 def material_curvatures(ed, vertex_edges, weld, v):
     """Integrated material curvatures at vertex v in the frame of each edge: ``(k1_e, k2_e, k1_f, k2_f)``
     with ``k1_j = kb . m2_j``, ``k2_j = -kb . m1_j``; ``ed`` from ``geometry.edge_frames``."""
-    te, _, m1e, m2e = edge_vectors(ed, vertex_edges[v, 0])
-    tf, _, m1f, m2f = edge_vectors(ed, vertex_edges[v, 1])
-    m1f, m2f = welded(m1f, m2f, weld[v])
-    kb = curvature_binormal_of(ed, vertex_edges[v, 0], vertex_edges[v, 1])
-    return vdot(kb, m2e), -vdot(kb, m1e), vdot(kb, m2f), -vdot(kb, m1f)
+    _, _, _, _, _, _, _, _, _, k1e, k2e, k1f, k2f = _vertex_curvatures(ed, vertex_edges, weld, v)
+    return k1e, k2e, k1f, k2f
 
 
 @njit(cache=True)
@@ -80,18 +149,9 @@ def material_curvature(ed, vertex_edges, weld, v):
 @njit(cache=True, inline="always")
 def _bend_energy_local(ed, vertex_edges, weld, v, kappa_bar, b1, b2):
     """Energy of vertex v alone (what ``_bend_local`` returns; small enough to be inlined in the energy loop)."""
-    te, _, m1e, m2e = edge_vectors(ed, vertex_edges[v, 0])
-    tf, _, m1f, m2f = edge_vectors(ed, vertex_edges[v, 1])
-    m1f, m2f = welded(m1f, m2f, weld[v])
-    kb = curvature_binormal_of(ed, vertex_edges[v, 0], vertex_edges[v, 1])
-    k1e = vdot(kb, m2e)
-    k2e = -vdot(kb, m1e)
-    k1f = vdot(kb, m2f)
-    k2f = -vdot(kb, m1f)
-    r1e = k1e - kappa_bar[v, 0]
-    r2e = k2e - kappa_bar[v, 1]
-    r1f = k1f - kappa_bar[v, 2]
-    r2f = k2f - kappa_bar[v, 3]
+    _, _, m1e, m2e, _, _, m1f, m2f, kb, k1e, k2e, k1f, k2f = _vertex_curvatures(ed, vertex_edges, weld, v)
+    r1e, r2e, r1f, r2f = _curvature_residuals(k1e, k2e, k1f, k2f, kappa_bar, v)
+    # (grouped as b / 4 rather than _bend_weights_energy's w / 2: kept as it was, bitwise)
     return 0.25 * (b1 * (r1e * r1e + r1f * r1f) + b2 * (r2e * r2e + r2f * r2f))
 
 
@@ -108,49 +168,14 @@ def _bend_local(ed, vertex_edges, weld, v, kappa_bar, b1, b2, order, g8, H8, wor
     part of the Hessian, sum_c s_c Hess(kb . u_c), is assembled once from the weighted sums ``K = sum s_c k_c``
     and ``U = sum s_c u_c`` rather than per component.
     """
-    te, le, m1e, m2e = edge_vectors(ed, vertex_edges[v, 0])
-    tf, lf, m1f, m2f = edge_vectors(ed, vertex_edges[v, 1])
-    m1f, m2f = welded(m1f, m2f, weld[v])   # d/dtheta_f is unchanged: m1f' = m2f, m2f' = -m1f
-    chi = 1.0 + vdot(te, tf)
-    kb = curvature_binormal_of(ed, vertex_edges[v, 0], vertex_edges[v, 1])
-    k1e = vdot(kb, m2e)
-    k2e = -vdot(kb, m1e)
-    k1f = vdot(kb, m2f)
-    k2f = -vdot(kb, m1f)
-    r1e = k1e - kappa_bar[v, 0]
-    r2e = k2e - kappa_bar[v, 1]
-    r1f = k1f - kappa_bar[v, 2]
-    r2f = k2f - kappa_bar[v, 3]
-    # E = 1/2 sum_c w_c r_c^2 with w = b / 2: the two edge sides share the vertex's Voronoi cell
-    w1 = 0.5 * b1
-    w2 = 0.5 * b2
-    energy = 0.5 * (w1 * (r1e * r1e + r1f * r1f) + w2 * (r2e * r2e + r2f * r2f))
+    te, le, m1e, m2e, tf, lf, m1f, m2f, kb, k1e, k2e, k1f, k2f = _vertex_curvatures(ed, vertex_edges, weld, v)
+    r1e, r2e, r1f, r2f = _curvature_residuals(k1e, k2e, k1f, k2f, kappa_bar, v)
+    w1, w2, energy = _bend_weights_energy(b1, b2, r1e, r2e, r1f, r2f)
     if order == 0:
         return energy
 
-    s1e = w1 * r1e
-    s2e = w2 * r2e
-    s1f = w1 * r1f
-    s2f = w2 * r2f
-    ichi = 1.0 / chi
-    tt = vscale(ichi, vadd(te, tf))
-    # U = sum_c s_c u_c (edge e and edge f parts) and K = sum_c s_c k_c
-    Ue = vsub(vscale(s1e, m2e), vscale(s2e, m1e))
-    Uf = vsub(vscale(s1f, m2f), vscale(s2f, m1f))
-    K = s1e * k1e + s2e * k2e + s1f * k1f + s2f * k2f
-    dd = vscale(2.0 * ichi, vadd(Ue, Uf))
-    tf_x_dd = vcross(tf, dd)
-    te_x_dd = vcross(te, dd)
-    # d(kb . u)/de = (-(kb . u) tt + 2 tf x u / chi) / |e|, d/df = (-(kb . u) tt - 2 te x u / chi) / |f|
-    # (a material vector of either edge turns with its own tangent only, normal to kb); d k1_j / dtheta_j =
-    # k2_j, d k2_j / dtheta_j = -k1_j
-    ge = vscale(1.0 / le, vadd(vscale(-K, tt), tf_x_dd))
-    gf = vscale(1.0 / lf, vsub(vscale(-K, tt), te_x_dd))
-    for i in range(3):
-        g8[i] = ge[i]
-        g8[3 + i] = gf[i]
-    g8[6] = s1e * k2e - s2e * k1e
-    g8[7] = s1f * k2f - s2f * k1f
+    s1e, s2e, s1f, s2f, ichi, tt, Ue, Uf, K, dd, tf_x_dd, te_x_dd = _bend_gradient_of(
+        te, le, m1e, m2e, tf, lf, m1f, m2f, k1e, k2e, k1f, k2f, r1e, r2e, r1f, r2f, w1, w2, g8)
     if order == 1:
         return energy
 

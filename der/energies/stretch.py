@@ -18,31 +18,57 @@ from ..geometry import edge_array
 from ..stencils import edge_dofs, elongation, scatter_band, scatter_gradient
 
 
+# ---- the formulas of one edge, one home each: called by ``_stretch_local`` and by the fused vertex pass
+# (``energies.vertex._stretch_local_upper``), which then computes the same floating-point operations in the same
+# order (``tools/kernel_fingerprint.py`` checks it bitwise).
+# Editing one of them: numba's cache keys a kernel on its own file only, so also touch energies/vertex.py (its
+# fused kernels inline these, and scene.evaluate calls them) or clear the caches, else they run stale.
+
+
+@njit(cache=True, inline="always")
+def _stretch_energy_of(g, k, lam):
+    """E_j = lam g + k g^2 / 2 of an edge with elongation ``g``."""
+    return lam * g + 0.5 * k * g * g
+
+
+@njit(cache=True, inline="always")
+def _stretch_tension(E, j, g, le, k, lam, g6):
+    """``g6`` <- the gradient of edge j's stretching in (x_a, x_b), -T t and T t; returns ``(T, t)``: the tension
+    T = lam + k g and the unit tangent t = e_j / |e_j| (``le`` = |e_j|)."""
+    tension = lam + k * g
+    t = (E[j, 0] / le, E[j, 1] / le, E[j, 2] / le)
+    for i in range(3):
+        g6[i] = -tension * t[i]
+        g6[3 + i] = tension * t[i]
+    return tension, t
+
+
+@njit(cache=True, inline="always")
+def _stretch_hessian_entry(k, c, t, i, jj):
+    """Entry (i, jj) of the x_a x_a block of the stretching Hessian, (k - c) t t^T + c I with c = T / |e_j| (the
+    x_b x_b block is the same, the x_a x_b blocks its negative)."""
+    h = (k - c) * t[i] * t[jj]
+    if i == jj:
+        h += c
+    return h
+
+
 @njit(cache=True)
 def _stretch_local(E, j, l_bar, k, lam, order, g6, H6):
     """Energy of edge j; gradient ``g6`` in (x_a, x_b) with order >= 1, Hessian ``H6`` with order >= 2. ``E``:
     the edge vectors (``geometry.edge_array``; with their low parts, 6 columns, the elongation is formed without
     cancellation, ``stencils.elongation``)."""
-    e0 = E[j, 0]
-    e1 = E[j, 1]
-    e2 = E[j, 2]
     g, le = elongation(E, j, l_bar)
-    energy = lam * g + 0.5 * k * g * g
+    energy = _stretch_energy_of(g, k, lam)
     if order == 0:
         return energy
-    tension = lam + k * g
-    t = (e0 / le, e1 / le, e2 / le)
-    for i in range(3):
-        g6[i] = -tension * t[i]
-        g6[3 + i] = tension * t[i]
+    tension, t = _stretch_tension(E, j, g, le, k, lam, g6)
     if order == 1:
         return energy
     c = tension / le
     for i in range(3):
         for jj in range(3):
-            h = (k - c) * t[i] * t[jj]
-            if i == jj:
-                h += c
+            h = _stretch_hessian_entry(k, c, t, i, jj)
             H6[i, jj] = h
             H6[3 + i, 3 + jj] = h
             H6[i, 3 + jj] = -h

@@ -20,14 +20,33 @@ from numba import njit
 from .stiffness import twisting_at
 from ..stencils import (
     add_cross_matrix, add_outer, add_sym_outer, curvature_binormal_of, edge_vectors, expand_vertex_hessian,
-    scatter_band, scatter_vertex_gradient, vadd, vcross, vdot, vertex_dofs, vscale,
+    scatter_band, scatter_vertex_gradient, vadd, vdot, vertex_dofs, vscale,
 )
+
+
+# Editing one of them: numba's cache keys a kernel on its own file only, so also touch energies/vertex.py (its
+# fused kernels inline these, and scene.evaluate calls them) or clear the caches, else they run stale.
+@njit(cache=True, inline="always")
+def _material_twist(q, vertex_edges, reference_twist, weld, v):
+    """``material_twist``'s formula, its one home (inlined here and in ``energies.vertex._bend_twist_local``)."""
+    return q[4 * vertex_edges[v, 1] + 3] - q[4 * vertex_edges[v, 0] + 3] + reference_twist[v] + weld[v]
 
 
 @njit(cache=True)
 def material_twist(q, vertex_edges, reference_twist, weld, v):
     """Integrated material twist m_v (radians) at vertex v (``weld``: see the module docstring)."""
-    return q[4 * vertex_edges[v, 1] + 3] - q[4 * vertex_edges[v, 0] + 3] + reference_twist[v] + weld[v]
+    return _material_twist(q, vertex_edges, reference_twist, weld, v)
+
+
+@njit(cache=True, inline="always")
+def _twist_rate_row(kb, le, lf, D, c):
+    """``D[c]`` <- the gradient of the material twist in (e, f, theta_e, theta_f): ``dm/de = kb / (2|e|)``,
+    ``dm/df = kb / (2|f|)``, -1, 1 (its one home: also a row of ``energies.vertex._bend_twist_local``)."""
+    for i in range(3):
+        D[c, i] = 0.5 * kb[i] / le
+        D[c, 3 + i] = 0.5 * kb[i] / lf
+    D[c, 6] = -1.0
+    D[c, 7] = 1.0
 
 
 @njit(cache=True)
@@ -36,8 +55,7 @@ def _twist_local(q, ed, vertex_edges, reference_twist, weld, v, mbar, stiff, ord
     ``ed`` from ``geometry.edge_frames`` (only its tangents and lengths are used). With ``add`` the gradient and
     Hessian are added to ``g8``, ``H8`` (another term's, e.g. the bending of the same vertex) instead of
     overwriting them."""
-    m = material_twist(q, vertex_edges, reference_twist, weld, v)
-    r = m - mbar
+    r = _material_twist(q, vertex_edges, reference_twist, weld, v) - mbar
     energy = 0.5 * stiff * r * r
     if order == 0:
         return energy
@@ -45,12 +63,8 @@ def _twist_local(q, ed, vertex_edges, reference_twist, weld, v, mbar, stiff, ord
     tf, lf, _, _ = edge_vectors(ed, vertex_edges[v, 1])
     chi = 1.0 + vdot(te, tf)
     kb = curvature_binormal_of(ed, vertex_edges[v, 0], vertex_edges[v, 1])
+    _twist_rate_row(kb, le, lf, work, 0)
     dm = work[0]
-    for i in range(3):
-        dm[i] = 0.5 * kb[i] / le
-        dm[3 + i] = 0.5 * kb[i] / lf
-    dm[6] = -1.0
-    dm[7] = 1.0
     for i in range(8):
         if add:
             g8[i] += stiff * r * dm[i]

@@ -17,19 +17,21 @@ import numpy as np
 from numba import njit
 # numba's cache keys a kernel on its own file only: this file was edited with the compensated edges of
 # issue 17 (geometry.edge_array's low parts, stencils.curvature_binormal_of / elongation) so that its
-# kernels are compiled again with them.
+# kernels are compiled again with them. The same holds for the one-vertex formulas it inlines from bend.py,
+# twist.py and stretch.py (``_vertex_curvatures``, ``_bend_gradient_of``, ``_twist_rate_row``,
+# ``_stretch_tension``, ...): after editing one of them, edit this file too (or clear the caches).
 
 from ..geometry import edge_array, transport_jacobian_edge
 from ..linalg import zero_band_column
 from ..stencils import (
     elongation,
-    band_positions, curvature_binormal_of, edge_vectors, expand_vertex_hessian, scatter_band,
-    scatter_band_symmetric_at, scatter_vertex_gradient, vadd, vcross, vdot, vertex_dofs, vscale, vsub,
+    band_positions, expand_vertex_hessian, scatter_band, scatter_band_symmetric_at, scatter_vertex_gradient, vadd,
+    vcross, vdot, vertex_dofs, vscale, vsub,
 )
-from .bend import _bend_local, welded
+from .bend import _bend_gradient_of, _bend_local, _bend_weights_energy, _curvature_residuals, _vertex_curvatures
 from .stiffness import bending_at, twisting_at
-from .stretch import _stretch_local
-from .twist import _twist_local
+from .stretch import _stretch_energy_of, _stretch_hessian_entry, _stretch_local, _stretch_tension
+from .twist import _material_twist, _twist_local, _twist_rate_row
 
 
 @njit(cache=True)
@@ -71,6 +73,9 @@ def stretch_bend_twist_hessian(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_
     ``(stretch, bending, twisting)`` energies. ``E``: the edge vectors (``geometry.edge_array``; formed from ``q``
     if None)."""
     Ee = edge_array(q, edge_nodes) if E is None else E
+    # the order as a literal: numba compiles the pass once per order and prunes the other order's branches, so the
+    # residual's order-1 pass does not carry the Hessian's code (~15 s more compilation than one version for both
+    # orders; their speeds differed by less than this machine's noise in tools/bench_kernels.py, 3-10 %)
     return _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_stretch, lam, reference_twist,
                                weld, kappa_bar, twist_bar, voronoi, A1, A2, grad, ab, kl, ku, perm, Ee, 2,
                                np.empty((0, 3)), np.empty(0), transport)
@@ -108,8 +113,8 @@ def _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_
     Compiled as a function of its own, called by both wrappers, and so is ``_bend_twist_local``: inlined into
     their callers at numba's level (``inline="always"``), every caller and every call site compiled the whole
     pass again, the order-2 stencil included in the order-1 kernel, and the first run's warm-up took 387 s of
-    CPU instead of 218 s (``python tools/compile_time.py --against a64a219``). One call per evaluation and one
-    per vertex cost nothing measurable (``tools/bench_kernels.py``, docs/scaling.md)."""
+    CPU instead of 218 s (s9-compile, ``python tools/compile_time.py --against a64a219``). One call per
+    evaluation and one per vertex cost nothing measurable (``tools/bench_kernels.py``, docs/scaling.md)."""
     Ee = E
     n_edges = edge_nodes.shape[0]
     g8 = np.empty(8)
@@ -251,8 +256,9 @@ def _stretch_bend_twist(q, ed, edge_nodes, vertex_nodes, vertex_edges, l_bar, k_
 # term of bending and twisting summed per entry, in registers, instead of one pass over the 8 x 8 array per term),
 # mapping them to the stencil's 66 upper entries rather than 121 and writing each into the band twice (row and
 # column) halves the local arithmetic of the assembly. The band's energy part is then exactly symmetric (before,
-# its two triangles differed by round-off: (s a_i) b_j against (s a_j) b_i). Same formulas as
-# ``energies.bend._bend_local`` and ``energies.twist._twist_local``, regrouped (to round-off).
+# its two triangles differed by round-off: (s a_i) b_j against (s a_j) b_i). The curvatures, residuals, energies
+# and gradients are those of ``energies.bend`` and ``energies.twist``, from their own helpers (bitwise); the
+# Hessian has their formulas regrouped per entry (to round-off), so it is written out here.
 
 
 @njit(cache=True)
@@ -264,51 +270,15 @@ def _bend_twist_local(q, ed, vertex_edges, reference_twist, weld, v, kappa_bar, 
     forces), and ``H[i, j]`` (i <= j; the strictly lower part is not written) <- the upper triangle of the sum of
     their Hessians, with the quantities they share formed once. ``D``: a (5, 8) scratch array (the gradients of
     the four curvature components and of the twist, the rows of the Gauss-Newton part)."""
-    ie = vertex_edges[v, 0]
-    jf = vertex_edges[v, 1]
-    te, le, m1e, m2e = edge_vectors(ed, ie)
-    tf, lf, m1f, m2f = edge_vectors(ed, jf)
-    m1f, m2f = welded(m1f, m2f, weld[v])
-    chi = 1.0 + vdot(te, tf)
-    kb = curvature_binormal_of(ed, ie, jf)
-    k1e = vdot(kb, m2e)
-    k2e = -vdot(kb, m1e)
-    k1f = vdot(kb, m2f)
-    k2f = -vdot(kb, m1f)
-    r1e = k1e - kappa_bar[v, 0]
-    r2e = k2e - kappa_bar[v, 1]
-    r1f = k1f - kappa_bar[v, 2]
-    r2f = k2f - kappa_bar[v, 3]
-    w1 = 0.5 * b1
-    w2 = 0.5 * b2
-    e_bend = 0.5 * (w1 * (r1e * r1e + r1f * r1f) + w2 * (r2e * r2e + r2f * r2f))
-    s1e = w1 * r1e
-    s2e = w2 * r2e
-    s1f = w1 * r1f
-    s2f = w2 * r2f
-    ichi = 1.0 / chi
-    tt = vscale(ichi, vadd(te, tf))
-    Ue = vsub(vscale(s1e, m2e), vscale(s2e, m1e))
-    Uf = vsub(vscale(s1f, m2f), vscale(s2f, m1f))
-    K = s1e * k1e + s2e * k2e + s1f * k1f + s2f * k2f
-    dd = vscale(2.0 * ichi, vadd(Ue, Uf))
-    X = vcross(tf, dd)
-    Z = vcross(te, dd)
-    ge = vscale(1.0 / le, vadd(vscale(-K, tt), X))
-    gf = vscale(1.0 / lf, vsub(vscale(-K, tt), Z))
-    for i in range(3):
-        g8[i] = ge[i]
-        g8[3 + i] = gf[i]
-    g8[6] = s1e * k2e - s2e * k1e
-    g8[7] = s1f * k2f - s2f * k1f
+    te, le, m1e, m2e, tf, lf, m1f, m2f, kb, k1e, k2e, k1f, k2f = _vertex_curvatures(ed, vertex_edges, weld, v)
+    r1e, r2e, r1f, r2f = _curvature_residuals(k1e, k2e, k1f, k2f, kappa_bar, v)
+    w1, w2, e_bend = _bend_weights_energy(b1, b2, r1e, r2e, r1f, r2f)
+    s1e, s2e, s1f, s2f, ichi, tt, Ue, Uf, K, dd, X, Z = _bend_gradient_of(
+        te, le, m1e, m2e, tf, lf, m1f, m2f, k1e, k2e, k1f, k2f, r1e, r2e, r1f, r2f, w1, w2, g8)
     # twisting (as _twist_local): m = theta_f - theta_e + reference twist (+ weld), dm/de = kb / (2|e|), ...
-    r = q[4 * jf + 3] - q[4 * ie + 3] + reference_twist[v] + weld[v] - mbar
+    r = _material_twist(q, vertex_edges, reference_twist, weld, v) - mbar
     e_twist = 0.5 * stiff * r * r
-    for i in range(3):
-        D[4, i] = 0.5 * kb[i] / le
-        D[4, 3 + i] = 0.5 * kb[i] / lf
-    D[4, 6] = -1.0
-    D[4, 7] = 1.0
+    _twist_rate_row(kb, le, lf, D, 4)
     for i in range(8):
         g8[i] += stiff * r * D[4, i]
     st = stiff * r
@@ -399,22 +369,13 @@ def _stretch_local_upper(E, j, l_bar, k, lam, g6, H11, o):
     """``energies.stretch._stretch_local`` at order 2 with its 6 x 6 Hessian's upper triangle added straight into
     H11 at stencil positions (o, o+1, o+2, o+4, o+5, o+6): the same operations, so the energy, ``g6`` and every
     entry added are bitwise those of ``_stretch_local``."""
-    e0 = E[j, 0]
-    e1 = E[j, 1]
-    e2 = E[j, 2]
     g, le = elongation(E, j, l_bar)
-    energy = lam * g + 0.5 * k * g * g
-    tension = lam + k * g
-    t = (e0 / le, e1 / le, e2 / le)
-    for i in range(3):
-        g6[i] = -tension * t[i]
-        g6[3 + i] = tension * t[i]
+    energy = _stretch_energy_of(g, k, lam)
+    tension, t = _stretch_tension(E, j, g, le, k, lam, g6)
     c = tension / le
     for i in range(3):
         for jj in range(3):
-            h = (k - c) * t[i] * t[jj]
-            if i == jj:
-                h += c
+            h = _stretch_hessian_entry(k, c, t, i, jj)
             if i <= jj:
                 H11[o + i, o + jj] += h             # x_a x_a
                 H11[o + 4 + i, o + 4 + jj] += h     # x_b x_b

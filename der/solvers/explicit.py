@@ -57,18 +57,8 @@ NOISE_FACTOR = 3.0     # at the floor, a negative power below this many standard
 
 @njit(cache=True)
 def _gershgorin(ab, kl, ku, perm, mass):
-    """max_i sum_j |K_ij| / sqrt(m_i m_j): an upper bound of omega_max^2."""
-    n = ab.shape[1]
-    off = kl + ku
-    inv = np.empty(n, dtype=np.int64)
-    for d in range(n):
-        inv[perm[d]] = d
-    rows = np.zeros(n)
-    for j in range(n):
-        mj = mass[inv[j]]
-        for i in range(max(0, j - ku), min(n - 1, j + kl) + 1):
-            rows[i] += abs(ab[off + i - j, j]) / np.sqrt(mass[inv[i]] * mj)
-    return rows.max()
+    """max_i sum_j |K_ij| / sqrt(m_i m_j): an upper bound of omega_max^2 (the largest of ``_gershgorin_rows``)."""
+    return _gershgorin_rows(ab, kl, ku, perm, mass, np.zeros(ab.shape[1])).max()
 
 
 @njit(cache=True)
@@ -163,14 +153,14 @@ def _fire_run(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, inv_scale
     n = q.shape[0]
     grad = np.zeros(n)
     fext = np.zeros(n)
-    ab = np.zeros((1, 1))
+    ab = np.zeros((1, 1)).T    # Fortran-ordered like the solvers' bands: the kernels compile once for both
     q_old = q.copy()
     lo_old = q_lo.copy()
     d1_old = d1.copy()
     t_old = tangents.copy()
     tw_old = twist.copy()
     f = np.zeros(n)
-    energy = evaluate(plan, q, d1, twist, lam, 1, grad, fext, ab, kl, ku, perm, q_lo)
+    energy = evaluate(plan, q, d1, twist, lam, np.int64(1), grad, fext, ab, kl, ku, perm, q_lo)
     if project:
         energy += tension_energy(q, plan.edge_nodes, plan.l_bar, lam, q_lo)
     residual = np.inf
@@ -246,7 +236,7 @@ def _fire_run(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, inv_scale
             fext_old_dot += fext[i] * ((q[i] - q_old[i]) + (q_lo[i] - lo_old[i]))
         new_energy = np.inf
         if ok:
-            new_energy = evaluate(plan, q, d1, twist, lam, 1, grad, fext, ab, kl, ku, perm, q_lo)
+            new_energy = evaluate(plan, q, d1, twist, lam, np.int64(1), grad, fext, ab, kl, ku, perm, q_lo)
             if project:       # the Lagrangian E + lam . g (projection.tension_energy)
                 new_energy += tension_energy(q, plan.edge_nodes, plan.l_bar, lam, q_lo)
         kinetic = 0.0
@@ -277,7 +267,7 @@ def _fire_run(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, inv_scale
             dt *= f_dec
             alpha = alpha0
             n_pos = 0
-            energy = evaluate(plan, q, d1, twist, lam, 1, grad, fext, ab, kl, ku, perm, q_lo)
+            energy = evaluate(plan, q, d1, twist, lam, np.int64(1), grad, fext, ab, kl, ku, perm, q_lo)
             if project:
                 energy += tension_energy(q, plan.edge_nodes, plan.l_bar, lam, q_lo)
             e_total = energy - work_done

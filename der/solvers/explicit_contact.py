@@ -197,7 +197,7 @@ def step_bound_safe(q, q_lo, q_old, lo_old, n_nodes, min_gap, fraction):
 def _forces(plan, q, q_lo, d1, twist, lam, grad, fext, ab, kl, ku, perm, edges, pairs, edge_radius, dhat, kappa):
     """(elastic + barrier energy, smallest gap of the listed pairs); grad <- dE/dq (barrier included), fext <- the
     loads."""
-    energy = evaluate(plan, q, d1, twist, lam, 1, grad, fext, ab, kl, ku, perm, q_lo)
+    energy = evaluate(plan, q, d1, twist, lam, np.int64(1), grad, fext, ab, kl, ku, perm, q_lo)
     e_c, gap = barrier_gradient(q, edges, pairs, edge_radius, dhat, kappa, grad, q_lo)
     return energy + e_c, gap
 
@@ -216,7 +216,7 @@ def fire_run_contact(plan, q, q_lo, d1, tangents, twist, lam, v, mass, fixed, in
     n_nodes = x_ref.shape[0]
     grad = np.zeros(n)
     fext = np.zeros(n)
-    ab = np.zeros((1, 1))
+    ab = np.zeros((1, 1)).T    # Fortran-ordered like the solvers' bands: the kernels compile once for both
     q_old = q.copy()
     lo_old = q_lo.copy()
     d1_old = d1.copy()

@@ -106,7 +106,6 @@ from numba import njit
 from ..linalg import (BandLU, add_diagonal, band_ldlt, band_ldlt_compact, band_ldlt_solve, band_ldlt_solve_inplace,
                       band_matvec, band_negative_pivots, band_to_sparse, condense_band, constrain_band,
                       ldlt_compact_solve_block)
-from ..loads import DistributedForce, EndForce, EndTorque, FollowerForce, PointForce, PointTorque, TwistingMoment
 from .edge_coordinates import EDGE_BAND, EDGE_CHECK_TOL, EdgeCoordinates, band_asymmetry, edge_eligible
 from .system import condense_system_band, evaluate_system, rotational_inertia, take_hessian
 
@@ -133,13 +132,8 @@ def _dead_directions(scene):
     """Unit vectors of every non-zero dead force and dead torque of the scene (they break rotations)."""
     dirs = []
     for load in scene.loads:
-        if isinstance(load, PointForce) or isinstance(load, EndForce):
-            v = np.asarray(load.force, float)
-        elif isinstance(load, DistributedForce):
-            v = np.asarray(load.density, float)
-        elif isinstance(load, (EndTorque, PointTorque)) and not load.follower:
-            v = np.asarray(load.torque, float)
-        else:
+        v = load.dead_vector()
+        if v is None:
             continue
         big = np.abs(v).max()
         if big > 0 and np.isfinite(big):
@@ -152,13 +146,7 @@ def _loads_turn_with_sections(scene):
     """Whether a load depends on the sections' angles: a follower force with a component along m1 or m2, a follower
     point torque given along (m1, m2, t) with one of the first two. Such a load breaks the uniform section turn
     (every theta + c); dead loads, twisting moments and moments about the tangent do not."""
-    for load in scene.loads:
-        if isinstance(load, FollowerForce) and (load.density[0] != 0.0 or load.density[1] != 0.0):
-            return True
-        if isinstance(load, PointTorque) and load.follower and np.ndim(load.torque) == 1 \
-                and (load.torque[0] != 0.0 or load.torque[1] != 0.0):
-            return True
-    return False
+    return any(load.turns_with_sections() for load in scene.loads)
 
 
 def _rigid_generators(rod, state):
@@ -302,7 +290,7 @@ def symmetry_modes(system, state):
             v[d] = 1.0
             modes.append(v)
     if rod.closed and not fixed.any() and _ring_is_uniform(rod) \
-            and all(isinstance(load, (DistributedForce, TwistingMoment)) for load in scene.loads):
+            and all(load.keeps_ring_sliding() for load in scene.loads):
         modes.append(sliding_mode(rod, state))
     for v in modes:
         v[fixed] = 0.0    # exact zeros (the rigid null space is zero there to round-off)

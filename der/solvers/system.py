@@ -27,7 +27,6 @@ from ..diagnostics import _edge_forces
 from ..energies.stretch import elongations
 from ..geometry import edge_array, edge_array_into, edge_frames, transport_frames
 from ..linalg import BandLDLT, band_layout, band_matvec, condense_band, condense_vector, constrain_band, dot, expand_step, new_band
-from ..loads import DistributedForce, EndForce, EndTorque, FollowerForce, PointForce, PointTorque, TwistingMoment
 from ..scene import COUNTER_NAMES, edge_forces_in_pass, evaluate, make_plan
 
 
@@ -142,17 +141,7 @@ def applied_scales(scene):
     L = scene.rod.length
     F_app = M_app = 0.0
     for load in scene.loads:
-        f = m = 0.0
-        if isinstance(load, (PointForce, EndForce)):
-            f = safe_norm(load.force)
-        elif isinstance(load, DistributedForce):
-            f = safe_norm(load.density) * L
-        elif isinstance(load, (EndTorque, PointTorque)):
-            m = abs(float(load.torque)) if np.ndim(load.torque) == 0 else safe_norm(load.torque)
-        elif isinstance(load, FollowerForce):
-            f = safe_norm(load.density) * L
-        elif isinstance(load, TwistingMoment):
-            m = abs(load.density) * L
+        f, m = load.scale(L)
         if not (np.isfinite(f) and np.isfinite(m) and np.isfinite(f * L) and np.isfinite(m / L)):
             raise ValueError(f"load {load!r}: its scale (|force| {f:.3e}, |moment| {m:.3e}, over the rod length "
                              f"L = {L:g}) is not a finite double; scale the problem (units) so that its loads "
@@ -1038,22 +1027,17 @@ def check_equilibrium_exists(system, state):
     torque_total = 0.0
     conservative_torques_only = True
     for load in scene.loads:
-        if isinstance(load, (PointForce, EndForce)):
-            f = np.asarray(load.force, float)
-        elif isinstance(load, DistributedForce):
-            # the total the rod receives: the density times the length its nodes stand for (make_plan's lumping)
-            f = np.asarray(load.density, float) * float(rod.node_weights().sum())
-        else:
-            if isinstance(load, (EndTorque, PointTorque)) and not load.follower:
-                net_torque += np.asarray(load.torque, float)
-                torque_total += safe_norm(load.torque)
-            else:
-                conservative_torques_only = False    # follower moments turn with the rod
-            continue
-        net_force += f
-        total += safe_norm(f)
-        if np.any(f != 0.0):
-            conservative_torques_only = False        # forces have a moment that depends on the configuration
+        f, tau, follower = load.net(rod)
+        if f is not None:
+            net_force += f
+            total += safe_norm(f)
+            if np.any(f != 0.0):
+                conservative_torques_only = False    # forces have a moment that depends on the configuration
+        if tau is not None:
+            net_torque += tau
+            torque_total += safe_norm(tau)
+        if follower:
+            conservative_torques_only = False        # follower moments turn with the rod
     what = "an unconstrained rod" if not fixed.any() else None
     bad = [u for u in free_translations(system) if abs(u @ net_force) > 1e-12 * total]
     if bad:

@@ -31,6 +31,7 @@ import numpy as np
 import der
 from der import diagnostics as dg
 from der.cli import check_contact_resolution, scenario_main
+from der.continuation import leave_unstable
 
 PARAMETERS = [
     ("A1", 1.0, float, "bending stiffness"),
@@ -41,7 +42,8 @@ PARAMETERS = [
     ("force", 0.0, float, "axial pulling force F on the sliding top end (0: Greenhill's problem)"),
     ("over", 2.5, float, "end rotation at the end of the continuation, in units of Greenhill's critical one"),
     ("sweep", 40, int, "continuation steps (at most 1/8 turn each)"),
-    ("perturb", 1e-3, float, "lateral imperfection (fraction of L) added to the start of each step while straight"),
+    ("perturb", 1e-3, float, "lateral imperfection (fraction of L) added to the start of each step while straight "
+     "(not on the clamped nodes), and the kick along the unstable mode of a straight state the solve returns"),
     ("contact", True, bool, "self-contact of the rod (--no-contact: the rod passes through itself)"),
 ]
 
@@ -109,9 +111,18 @@ def run(p, solver):
         scene = der.Scene(rod, loads=loads, contacts=contacts, constraints=[
             der.clamp("start"), der.clamp("end", rotation=P.rotation_z(2 * np.pi * N), slide=2)])
         start = state
-        if p.perturb and (not steps or steps[-1]["lateral"] < STRAIGHT * p.L):
+        straight = not steps or steps[-1]["lateral"] < STRAIGHT * p.L
+        if p.perturb and straight:
             start = rod.displaced(state, bump)      # the straight state is unstable past N_c: a nudge
         result = solver.solve(scene, state=start, stability=False, max_iterations=MAX_ITERATIONS)
+        if p.perturb and straight and result.converged:
+            # past N_c the solve may still return the straight state (an equilibrium, unstable: a root finder
+            # finds saddles too); kicked along its unstable mode (p.perturb L) and solved again, it leaves it
+            first = result
+            result, kicks = leave_unstable(scene, result, p.perturb, solve=solver.solve, max_iterations=MAX_ITERATIONS)
+            if kicks:
+                result.iterations += first.iterations        # (every solve of the step counts)
+                result.wall_time += first.wall_time
         steps.append(observe(P, rod, result, N, p))
         if not result.converged:
             break

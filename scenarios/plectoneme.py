@@ -44,7 +44,9 @@ PARAMETERS = [
     ("force", 1.0, float, "constant axial pulling force F on the sliding top end"),
     ("turns", 6.0, float, "number of turns N at the end of the continuation"),
     ("sweep", 48, int, "continuation steps from 0 to --turns (at most 1/4 turn each)"),
-    ("perturb", 1e-3, float, "lateral imperfection (fraction of L) added to the start of every step before contact"),
+    ("perturb", 1e-3, float, "lateral imperfection (fraction of L) added to the start of every step before contact "
+     "(not on the clamped nodes), and the kick along the unstable mode of an unstable equilibrium a step returns "
+     "(der.continuation's leave_unstable)"),
     ("samples", None, int, "contact barrier on m sample points per edge (der.self_contact(r, samples=m): smooth, "
      "exact Newton; docs/contact.md section 9) instead of segment distances"),
     ("predictor", "last", str, "each step's start: 'last' (the last point), 'secant' or 'tangent' (along dq/dN "
@@ -167,6 +169,7 @@ def run(p, solver):
     }
     branch = der.continuation(scene_of, 0.0, p.turns, parameter="turns", method="natural", dp=p.turns / p.sweep,
                               predictor=getattr(p, "predictor", "last"), perturb=perturb, stability=False,
+                              leave_unstable=p.perturb or None,
                               tol=solver.args.tol,
                               options=der.SolverOptions(max_iterations=MAX_ITERATIONS), summaries=summaries,
                               max_steps=8 * p.sweep, progress=False, keep_states=False, solve=solver.solve)

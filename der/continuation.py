@@ -73,6 +73,9 @@ DENSE_EIGENVECTOR_MAX_DOFS = 2400
 GAUGE_ANGLE_WEIGHT = 1e-8        # rigid motions are fitted on the node coordinates (Problem.gauge_coordinates)
 RP_REUSE_RATE = 0.1            # the corrector keeps dR/dp while each Newton step cuts the residual 10x or more
 PREDICTOR_HALVINGS = 4         # natural method, predictor "tangent": halvings of a start that violates a contact
+# unstable_mode: the dense eigen-solver only up to this many DOFs (a non-symmetric QZ costs ~0.7 s at 240 free DOFs,
+# greenhill n = 60; the banded shift-invert of der.solvers.stability ~10 ms)
+DENSE_MODES_MAX_DOFS = 60
 UNSTABLE_KICKS = 3             # leave_unstable: kicks along the lowest mode and solves again, at most, per point
 TANGENT_COS = 0.9              # a step whose tangent turns by more than acos(0.9) = 26 degrees is halved
 
@@ -842,7 +845,7 @@ def unstable_mode(scene, state, n_eigenvalues=2):
 
     system = build_system(scene, SolverOptions())
     st = prepare_state(system, state)
-    out = lowest_modes(system, st, n_eigenvalues)
+    out = lowest_modes(system, st, n_eigenvalues, dense_max=DENSE_MODES_MAX_DOFS)
     ev = np.asarray(out["eigenvalues"])
     if ev.size == 0 or not float(ev.real[0]) < -float(out["floors"][0]):
         return None
@@ -866,7 +869,8 @@ def leave_unstable(scene, result, kick, solve=None, tries=UNSTABLE_KICKS, **opti
 
     Each solve from a kick starts damped (``newton_first=False`` unless ``options`` say otherwise): Newton's
     method from near a saddle returns to it (measured on the plectoneme at n = 100, 2.25 turns, kicks of 1e-3 L:
-    three kicks, each solved back to the straight state; damped, one kick and the rod buckles).
+    after three kicks solved Newton-first the rod was still nearly straight and unstable; damped, one kick and it
+    buckles: docs/continuation.md).
 
     ``solve``: a function like der.solve (default der.solve, without raising), called as
     ``solve(scene, state=..., stability=False, **options)``. Returns (result, kicks): the last converged result

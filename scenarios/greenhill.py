@@ -5,9 +5,14 @@ force unless --force), is turned about z by its top clamp in a continuation from
 critical end rotation in --sweep steps, each solve starting from the last state. The straight rod is stable up
 to the torque M L / A1 = 2 x 4.4934 (tan x = x; with an axial pulling force F, the first root of the clamped
 rod's buckling condition, scenarios/plectoneme.py ``buckling_torque``), i.e. N_c = M_c L / (2 pi A2) turns
-(1.4303 A1 / A2 for F = 0). Past it the rod writhes: without contact (``--no-contact``) it passes through
-itself, loses two turns of Lk at a time and returns towards the straight state; with ``der.rod_contact(r)`` it
+(1.4303 A1 / A2 for F = 0). Past it the rod writhes: without contact (``--no-contact``), pulled, it passes
+through itself, loses two turns of Lk at a time and returns towards the straight state (with no force it closes
+into a ring whose end edges coincide, where Lk of the open rod is not defined); with ``der.rod_contact(r)`` it
 forms a loop whose strands touch, then a plectoneme (two interwound strands), and Lk = N at every step.
+
+The lateral imperfection (--perturb) moves the free nodes only (the clamps hold their end edges where the start
+state has them: a nudged node 1 tilted the bottom clamp); a straight state the solve returns past N_c, unstable,
+is kicked along its unstable mode and solved again (der.continuation.leave_unstable).
 
 Reported per step (lists): ``turns`` N, ``twist`` Tw and ``writhe`` Wr (turns; the open centreline closed as
 in scenarios/plectoneme.py), ``linking_number`` Tw + Wr, ``extension`` (top minus bottom end height),

@@ -1096,16 +1096,17 @@ def _step(problem, settings, state, p, t, x_pred, natural, landing, branch):
             if perturbed is not None and problem.admissible(p_new, perturbed):
                 pred = perturbed
         options = dataclasses.replace(settings["options"], tight_bend="warn")
-        result = settings["solve"](problem.scene(p_new), state=pred, options=options, tol=settings["tol"],
-                                   stability=False)
+        scene = problem.scene(p_new)
+        result = settings["solve"](scene, state=pred, options=options, tol=settings["tol"], stability=False)
         if not result.converged:
             return None
         if settings.get("leave_unstable"):
             # an unstable equilibrium (a root finder finds saddles too): kicked along its lowest mode and solved
             # again, so that the grid follows the branch that mode leads to
             first = result
-            result, kicks = leave_unstable(problem.scene(p_new), result, settings["leave_unstable"],
-                                           solve=settings["solve"], options=options, tol=settings["tol"])
+            # (the same scene: a solve hook sees one scene per point, solved again from each kick)
+            result, kicks = leave_unstable(scene, result, settings["leave_unstable"], solve=settings["solve"],
+                                           options=options, tol=settings["tol"])
             if kicks:
                 result.iterations += first.iterations     # (every solve of the point counts)
         if settings["predictor"] == "tangent":

@@ -20,7 +20,8 @@ in scenarios/plectoneme.py), ``linking_number`` Tw + Wr, ``extension`` (top minu
 ``min_distance`` (smallest centreline distance of non-neighbour edges) and ``contacts`` (pairs in contact);
 scalars ``greenhill_turns`` (theory N_c), ``buckling_turns`` (the last step still straight: lateral < 1e-2 L),
 ``loop_turns`` (the first step with a contact), ``plectoneme_turns`` (the first step whose contacts span more
-than a loop: contact pairs along at least 10 % of the rod), ``lk_error_max``.
+than a loop: contact pairs along at least 10 % of the rod), ``lk_error_max``, ``clamp_tilt_max`` (the largest
+angle, rad, of the bottom clamp's end edge against z over the steps, ``clamp_tilt`` per step: 0 to round-off).
 
 The check (exit 3 otherwise): with contact, |Lk - N| < 1e-6 and min_distance >= 2r at every step.
 
@@ -92,6 +93,8 @@ def observe(P, rod, result, N, p):
         "extension": float(top[2] - bottom[2]), "lateral": float(np.linalg.norm(x[:, :2], axis=1).max()),
         "torque": float(p.A2 * dg.material_twist_density(rod, st).mean()),
         "min_distance": c.get("min_distance"), "contacts": int(c.get("n_contacts", 0)), "contact_span": float(span),
+        # the bottom clamp's end edge against the z axis (rad): 0 to round-off, the clamp is not tilted
+        "clamp_tilt": P.bottom_tilt(x),
         "iterations": result.iterations, "runtime_s": result.wall_time,
     }
 
@@ -149,6 +152,7 @@ def summarise(p, steps, Nc):
     plect = [k for k, s in enumerate(steps) if s["contact_span"] >= PLECTONEME_SPAN]
     out["plectoneme_turns"] = float(N[plect[0]]) if plect else None
     out["greenhill_turns"] = float(Nc)
+    out["clamp_tilt_max"] = float(max(s["clamp_tilt"] for s in steps)) if steps else None
     out["final"] = {"turns": float(N[-1]) if N.size else None, "writhe": out["writhe"][-1] if steps else None,
                     "linking_number": out["linking_number"][-1] if steps else None,
                     "contacts": out["contacts"][-1] if steps else None}

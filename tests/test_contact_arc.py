@@ -150,6 +150,8 @@ def test_plectonemic_step_takes_fewer_newton_iterations_with_the_exact_hessian_a
         def solve(self, scene, **kw):
             kw.setdefault("tol", 1e-4)
             r = der.solve(scene, **kw)
+            if solves and solves[-1][0] is scene:
+                solves.pop()         # a point solved again (kicked off an unstable state): its last solve counts
             solves.append((scene, r.state))
             return r
 
@@ -192,6 +194,8 @@ def test_plectonemic_steps_take_the_arc_at_every_fraction_where_it_is_proven_saf
         def solve(self, scene, **kw):
             kw.setdefault("tol", 1e-4)
             r = der.solve(scene, **kw)
+            if solves and solves[-1][0] is scene:
+                solves.pop()         # a point solved again (kicked off an unstable state): its last solve counts
             solves.append((scene, r.state))
             return r
 

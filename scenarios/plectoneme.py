@@ -119,7 +119,9 @@ def bottom_tilt(x):
 
 def run(p, solver):
     """The continuation in N (der.continuation, natural parameter, fixed steps of --turns / --sweep, each solve
-    warm-started from the last state, the lateral imperfection added to each start until the first contact)."""
+    warm-started from the last state, the lateral imperfection added to each start until the first contact, on the
+    free nodes only, and a step that converged to an unstable equilibrium kicked along its lowest mode and solved
+    again: der.continuation's leave_unstable)."""
     rod = der.rod_from_shape(der.shapes.straight(p.L, p.n), p.A1, p.A2, EA=p.EA)
     contact = der.self_contact(p.radius, samples=p.samples)
     xi = rod.rest_q.reshape(-1, 4)[:, 2] / p.L

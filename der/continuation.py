@@ -73,6 +73,10 @@ DENSE_EIGENVECTOR_MAX_DOFS = 2400
 GAUGE_ANGLE_WEIGHT = 1e-8        # rigid motions are fitted on the node coordinates (Problem.gauge_coordinates)
 RP_REUSE_RATE = 0.1            # the corrector keeps dR/dp while each Newton step cuts the residual 10x or more
 PREDICTOR_HALVINGS = 4         # natural method, predictor "tangent": halvings of a start that violates a contact
+# unstable_mode: the dense eigen-solver only up to this many DOFs (a non-symmetric QZ costs ~0.7 s at 240 free DOFs,
+# greenhill n = 60; the banded shift-invert of der.solvers.stability ~10 ms)
+DENSE_MODES_MAX_DOFS = 60
+UNSTABLE_KICKS = 3             # leave_unstable: kicks along the lowest mode and solves again, at most, per point
 TANGENT_COS = 0.9              # a step whose tangent turns by more than acos(0.9) = 26 degrees is halved
 
 
@@ -221,7 +225,7 @@ def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=
                  ds_min=1e-6, ds_max=0.25, p_scale=None, max_steps=200, time_budget=math.inf, method="arclength",
                  summaries=None, stop=None, target=None, stability=True, locate=True, locate_tol=1e-7,
                  n_eigenvalues=6, tol=1e-8, max_newton=12, keep_states=True, progress=None, options=None, dp=None,
-                 predictor="secant", perturb=None, solve=None):
+                 predictor="secant", perturb=None, solve=None, leave_unstable=None):
     """Follow an equilibrium of ``scene_of(p)`` as p changes, from ``p0``.
 
     Parameters
@@ -262,6 +266,12 @@ def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=
         the last point).
     perturb : natural method only: f(p, state) -> RodState or None, applied to each step's predicted start
         (None: unchanged), e.g. an imperfection while the rod is straight.
+    leave_unstable : natural method only: None, or a kick size k > 0 (a fraction of the rod's length): a point
+        that converged to an unstable equilibrium (der.check_stability's lowest eigenvalue below zero, the
+        scene's symmetries removed) is moved along its lowest mode by k L (largest node displacement; the sign
+        that makes its largest node component positive) and solved again, up to UNSTABLE_KICKS times
+        (``leave_unstable``): past a threshold the grid follows the branch the unstable mode leads to instead of
+        the unstable one (e.g. the straight rod turned past its buckling). Costs one stability analysis per point.
     solve : a function with der.solve's arguments (scene, state=, options=, tol=, stability=) returning its
         SolveResult without raising when a solve does not converge, used for the first point and the natural
         method's steps (e.g. a scenario's runner that records them); default der.solve.
@@ -310,9 +320,12 @@ def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=
         raise TypeError(f"der.continuation: perturb must be a function (p, state) -> RodState or None; got {perturb!r}")
     if dp is not None:
         dp = validate.positive_number(dp, "der.continuation: dp")
-    if method != "natural" and (dp is not None or perturb is not None or predictor != "secant"):
-        raise ValueError("der.continuation: dp, perturb and predictor are options of method='natural' (the "
-                         "arclength method steps by ds along its tangent)")
+    if leave_unstable is not None:
+        leave_unstable = validate.positive_number(leave_unstable, "der.continuation: leave_unstable")
+    if method != "natural" and (dp is not None or perturb is not None or predictor != "secant"
+                                or leave_unstable is not None):
+        raise ValueError("der.continuation: dp, perturb, predictor and leave_unstable are options of "
+                         "method='natural' (the arclength method steps by ds along its tangent)")
     if solve is not None and not callable(solve):
         raise TypeError(f"der.continuation: solve must be a function like der.solve or None; got {solve!r}")
     if not (isinstance(time_budget, (int, float)) and time_budget > 0):
@@ -350,7 +363,7 @@ def continuation(scene_of, p0, p_end=None, *, state=None, parameter="p", bounds=
                     locate_tol=float(locate_tol), n_eigenvalues=n_eigenvalues, tol=float(tol),
                     max_newton=max_newton, keep_states=bool(keep_states), progress=progress, options=options,
                     dp=None if dp is None else float(dp), predictor=predictor, perturb=perturb,
-                    solve=solve or _der_solve)
+                    solve=solve or _der_solve, leave_unstable=leave_unstable)
     problem = _Problem(settings)
     scene = problem.scene(p0)
     if state is not None:
@@ -817,6 +830,70 @@ def critical_eigenvector(scene, state):
     return out
 
 
+def unstable_mode(scene, state, n_eigenvalues=2):
+    """The lowest mode of ``state`` as an equilibrium of ``scene`` if it is unstable, else None.
+
+    The stability analysis of ``der.check_stability`` (der.solvers.stability.lowest_modes: the constrained
+    stiffness pencil, fixed DOFs and the scene's symmetries removed); unstable: the lowest eigenvalue's real part
+    is below minus its round-off floor. Returns (eigenvalue, mode): the mode a full DOF vector (the end supports'
+    dependent DOFs moved with their free ones, zero on held DOFs), scaled to a largest node displacement of 1 and
+    signed so that its node component of largest magnitude is positive (one of its two signs, picked the same
+    way every time)."""
+    from .solvers import SolverOptions
+    from .solvers.stability import lowest_modes
+    from .solvers.system import build_system, prepare_state
+
+    system = build_system(scene, SolverOptions())
+    st = prepare_state(system, state)
+    out = lowest_modes(system, st, n_eigenvalues, dense_max=DENSE_MODES_MAX_DOFS)
+    ev = np.asarray(out["eigenvalues"])
+    if ev.size == 0 or not float(ev.real[0]) < -float(out["floors"][0]):
+        return None
+    v = np.asarray(out["vectors"][:, 0])
+    if np.iscomplexobj(v):
+        v = v.real if np.abs(v.real).max() >= np.abs(v.imag).max() else v.imag
+    v = _expand(system, np.array(v, dtype=float))
+    nodes = v.reshape(-1, 4)[:, :3]
+    k = int(np.argmax(np.abs(nodes)))
+    big = float(nodes.flat[k])
+    if big == 0.0:
+        return None           # no node moves in it (a mode of the angles alone): not a kick sideways
+    return float(ev.real[0]), v / big
+
+
+def leave_unstable(scene, result, kick, solve=None, tries=UNSTABLE_KICKS, **options):
+    """Leave an unstable equilibrium: while ``result.state`` is unstable (``unstable_mode``), move it along its
+    lowest mode by ``kick`` times the rod's length (the largest node displacement) and solve ``scene`` again
+    from there, at most ``tries`` times. A root finder converges to saddles too (e.g. a straight rod turned past
+    its buckling threshold); this puts the solve on the branch the unstable mode leads to.
+
+    Each solve from a kick starts damped (``newton_first=False`` unless ``options`` say otherwise): Newton's
+    method from near a saddle returns to it (measured on the plectoneme at n = 100, 2.25 turns, kicks of 1e-3 L:
+    after three kicks solved Newton-first the rod was still nearly straight and unstable; damped, one kick and it
+    buckles: docs/continuation.md).
+
+    ``solve``: a function like der.solve (default der.solve, without raising), called as
+    ``solve(scene, state=..., stability=False, **options)``. Returns (result, kicks): the last converged result
+    (``result`` itself if it is stable, or if no solve from a kick converged) and how many kicks were made."""
+    solve = solve or _der_solve
+    options.setdefault("newton_first", False)
+    rod = scene.rod
+    kicks = 0
+    for _ in range(tries):
+        found = unstable_mode(scene, result.state)
+        if found is None:
+            break
+        _, mode = found
+        blocks = kick * rod.length * mode.reshape(-1, 4)        # (x, y, z, theta) per node
+        start = rod.displaced(result.state, blocks[:, :3], blocks[:rod.n_edges, 3])
+        kicks += 1
+        again = solve(scene, state=start, stability=False, **options)
+        if not again.converged:
+            break
+        result = again
+    return result, kicks
+
+
 def _point(problem, settings, state, p, s, dp_ds, residual, iterations):
     """The table row of a converged point (and its stability)."""
     from .solvers import check_stability
@@ -1019,10 +1096,19 @@ def _step(problem, settings, state, p, t, x_pred, natural, landing, branch):
             if perturbed is not None and problem.admissible(p_new, perturbed):
                 pred = perturbed
         options = dataclasses.replace(settings["options"], tight_bend="warn")
-        result = settings["solve"](problem.scene(p_new), state=pred, options=options, tol=settings["tol"],
-                                   stability=False)
+        scene = problem.scene(p_new)
+        result = settings["solve"](scene, state=pred, options=options, tol=settings["tol"], stability=False)
         if not result.converged:
             return None
+        if settings.get("leave_unstable"):
+            # an unstable equilibrium (a root finder finds saddles too): kicked along its lowest mode and solved
+            # again, so that the grid follows the branch that mode leads to
+            first = result
+            # (the same scene: a solve hook sees one scene per point, solved again from each kick)
+            result, kicks = leave_unstable(scene, result, settings["leave_unstable"], solve=settings["solve"],
+                                           options=options, tol=settings["tol"])
+            if kicks:
+                result.iterations += first.iterations     # (every solve of the point counts)
         if settings["predictor"] == "tangent":
             problem.stiffness_from(result)
         return problem.prepared(p_new, result.state), p_new, result.residual, result.iterations
@@ -1147,5 +1233,5 @@ def _jsonable(value):
     return jsonable(value)
 
 
-__all__ = ["continuation", "Branch", "critical_eigenvector", "gauge_modes", "condensed_triplets", "METHODS", "KINDS",
-           "PREDICTORS"]
+__all__ = ["continuation", "Branch", "critical_eigenvector", "unstable_mode", "leave_unstable", "gauge_modes",
+           "condensed_triplets", "METHODS", "KINDS", "PREDICTORS"]

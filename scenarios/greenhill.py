@@ -5,9 +5,14 @@ force unless --force), is turned about z by its top clamp in a continuation from
 critical end rotation in --sweep steps, each solve starting from the last state. The straight rod is stable up
 to the torque M L / A1 = 2 x 4.4934 (tan x = x; with an axial pulling force F, the first root of the clamped
 rod's buckling condition, scenarios/plectoneme.py ``buckling_torque``), i.e. N_c = M_c L / (2 pi A2) turns
-(1.4303 A1 / A2 for F = 0). Past it the rod writhes: without contact (``--no-contact``) it passes through
-itself, loses two turns of Lk at a time and returns towards the straight state; with ``der.rod_contact(r)`` it
+(1.4303 A1 / A2 for F = 0). Past it the rod writhes: without contact (``--no-contact``), pulled, it passes
+through itself, loses two turns of Lk at a time and returns towards the straight state (with no force it closes
+into a ring whose end edges coincide, where Lk of the open rod is not defined); with ``der.rod_contact(r)`` it
 forms a loop whose strands touch, then a plectoneme (two interwound strands), and Lk = N at every step.
+
+The lateral imperfection (--perturb) moves the free nodes only (the clamps hold their end edges where the start
+state has them: a nudged node 1 tilted the bottom clamp); a straight state the solve returns past N_c, unstable,
+is kicked along its unstable mode and solved again (der.continuation.leave_unstable).
 
 Reported per step (lists): ``turns`` N, ``twist`` Tw and ``writhe`` Wr (turns; the open centreline closed as
 in scenarios/plectoneme.py), ``linking_number`` Tw + Wr, ``extension`` (top minus bottom end height),
@@ -15,7 +20,8 @@ in scenarios/plectoneme.py), ``linking_number`` Tw + Wr, ``extension`` (top minu
 ``min_distance`` (smallest centreline distance of non-neighbour edges) and ``contacts`` (pairs in contact);
 scalars ``greenhill_turns`` (theory N_c), ``buckling_turns`` (the last step still straight: lateral < 1e-2 L),
 ``loop_turns`` (the first step with a contact), ``plectoneme_turns`` (the first step whose contacts span more
-than a loop: contact pairs along at least 10 % of the rod), ``lk_error_max``.
+than a loop: contact pairs along at least 10 % of the rod), ``lk_error_max``, ``clamp_tilt_max`` (the largest
+angle, rad, of the bottom clamp's end edge against z over the steps, ``clamp_tilt`` per step: 0 to round-off).
 
 The check (exit 3 otherwise): with contact, |Lk - N| < 1e-6 and min_distance >= 2r at every step.
 
@@ -31,6 +37,7 @@ import numpy as np
 import der
 from der import diagnostics as dg
 from der.cli import check_contact_resolution, scenario_main
+from der.continuation import leave_unstable
 
 PARAMETERS = [
     ("A1", 1.0, float, "bending stiffness"),
@@ -41,7 +48,8 @@ PARAMETERS = [
     ("force", 0.0, float, "axial pulling force F on the sliding top end (0: Greenhill's problem)"),
     ("over", 2.5, float, "end rotation at the end of the continuation, in units of Greenhill's critical one"),
     ("sweep", 40, int, "continuation steps (at most 1/8 turn each)"),
-    ("perturb", 1e-3, float, "lateral imperfection (fraction of L) added to the start of each step while straight"),
+    ("perturb", 1e-3, float, "lateral imperfection (fraction of L) added to the start of each step while straight "
+     "(not on the clamped nodes), and the kick along the unstable mode of a straight state the solve returns"),
     ("contact", True, bool, "self-contact of the rod (--no-contact: the rod passes through itself)"),
 ]
 
@@ -85,6 +93,8 @@ def observe(P, rod, result, N, p):
         "extension": float(top[2] - bottom[2]), "lateral": float(np.linalg.norm(x[:, :2], axis=1).max()),
         "torque": float(p.A2 * dg.material_twist_density(rod, st).mean()),
         "min_distance": c.get("min_distance"), "contacts": int(c.get("n_contacts", 0)), "contact_span": float(span),
+        # the bottom clamp's end edge against the z axis (rad): 0 to round-off, the clamp is not tilted
+        "clamp_tilt": P.bottom_tilt(x),
         "iterations": result.iterations, "runtime_s": result.wall_time,
     }
 
@@ -99,15 +109,28 @@ def run(p, solver):
     xi = rod.rest_q.reshape(-1, 4)[:, 2] / p.L
     bump = np.zeros((rod.n_nodes, 3))
     bump[:, 0] = p.perturb * p.L * np.sin(np.pi * np.clip(xi, 0, 1))
+    # not on the nodes the clamps hold (each clamp holds its end edge where the start state has it, so a
+    # nudged node 1 would tilt the bottom clamp, by a little more at every nudged step)
+    bump[:2] = 0.0
+    bump[-2:] = 0.0
     state = rod.rest_state()
     steps = []
     for N in turns:
         scene = der.Scene(rod, loads=loads, contacts=contacts, constraints=[
             der.clamp("start"), der.clamp("end", rotation=P.rotation_z(2 * np.pi * N), slide=2)])
         start = state
-        if p.perturb and (not steps or steps[-1]["lateral"] < STRAIGHT * p.L):
+        straight = not steps or steps[-1]["lateral"] < STRAIGHT * p.L
+        if p.perturb and straight:
             start = rod.displaced(state, bump)      # the straight state is unstable past N_c: a nudge
         result = solver.solve(scene, state=start, stability=False, max_iterations=MAX_ITERATIONS)
+        if p.perturb and straight and result.converged:
+            # past N_c the solve may still return the straight state (an equilibrium, unstable: a root finder
+            # finds saddles too); kicked along its unstable mode (p.perturb L) and solved again, it leaves it
+            first = result
+            result, kicks = leave_unstable(scene, result, p.perturb, solve=solver.solve, max_iterations=MAX_ITERATIONS)
+            if kicks:
+                result.iterations += first.iterations        # (every solve of the step counts)
+                result.wall_time += first.wall_time
         steps.append(observe(P, rod, result, N, p))
         if not result.converged:
             break
@@ -129,6 +152,7 @@ def summarise(p, steps, Nc):
     plect = [k for k, s in enumerate(steps) if s["contact_span"] >= PLECTONEME_SPAN]
     out["plectoneme_turns"] = float(N[plect[0]]) if plect else None
     out["greenhill_turns"] = float(Nc)
+    out["clamp_tilt_max"] = float(max(s["clamp_tilt"] for s in steps)) if steps else None
     out["final"] = {"turns": float(N[-1]) if N.size else None, "writhe": out["writhe"][-1] if steps else None,
                     "linking_number": out["linking_number"][-1] if steps else None,
                     "contacts": out["contacts"][-1] if steps else None}

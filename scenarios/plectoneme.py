@@ -44,7 +44,9 @@ PARAMETERS = [
     ("force", 1.0, float, "constant axial pulling force F on the sliding top end"),
     ("turns", 6.0, float, "number of turns N at the end of the continuation"),
     ("sweep", 48, int, "continuation steps from 0 to --turns (at most 1/4 turn each)"),
-    ("perturb", 1e-3, float, "lateral imperfection (fraction of L) added to the start of every step before contact"),
+    ("perturb", 1e-3, float, "lateral imperfection (fraction of L) added to the start of every step before contact "
+     "(not on the clamped nodes), and the kick along the unstable mode of an unstable equilibrium a step returns "
+     "(der.continuation's leave_unstable)"),
     ("samples", None, int, "contact barrier on m sample points per edge (der.self_contact(r, samples=m): smooth, "
      "exact Newton; docs/contact.md section 9) instead of segment distances"),
     ("predictor", "last", str, "each step's start: 'last' (the last point), 'secant' or 'tangent' (along dq/dN "
@@ -109,14 +111,26 @@ def closed_writhe(x, L):
     return float(dg._writhe(np.ascontiguousarray(np.vstack([x, closure]))))
 
 
+def bottom_tilt(x):
+    """Angle (rad) between the bottom clamp's end edge x[1] - x[0] and the z axis."""
+    e = x[1] - x[0]
+    return float(np.arctan2(np.hypot(e[0], e[1]), e[2]))
+
+
 def run(p, solver):
     """The continuation in N (der.continuation, natural parameter, fixed steps of --turns / --sweep, each solve
-    warm-started from the last state, the lateral imperfection added to each start until the first contact)."""
+    warm-started from the last state, the lateral imperfection added to each start until the first contact, on the
+    free nodes only, and a step that converged to an unstable equilibrium kicked along its lowest mode and solved
+    again: der.continuation's leave_unstable)."""
     rod = der.rod_from_shape(der.shapes.straight(p.L, p.n), p.A1, p.A2, EA=p.EA)
     contact = der.self_contact(p.radius, samples=p.samples)
     xi = rod.rest_q.reshape(-1, 4)[:, 2] / p.L
     bump = np.zeros((rod.n_nodes, 3))
     bump[:, 0] = p.perturb * p.L * np.sin(np.pi * np.clip(xi, 0, 1))
+    # not on the nodes the clamps hold (each clamp holds its end edge where the start state has it, so a
+    # nudged node 1 would tilt the bottom clamp, by a little more at every nudged step)
+    bump[:2] = 0.0
+    bump[-2:] = 0.0
 
     def scene_of(N):
         return der.Scene(rod, loads=[der.end_force([0.0, 0.0, p.force])],
@@ -151,16 +165,19 @@ def run(p, solver):
         "twist": lambda scene, st: dg.total_twist(rod, st) / (2 * np.pi),
         "writhe": lambda scene, st: closed_writhe(st.positions, p.L),
         "min_distance": lambda scene, st: contact_of(scene, st)["min_distance"],
+        # the bottom clamp's end edge against the z axis (rad): 0 to round-off, the clamp is not tilted
+        "clamp_tilt": lambda scene, st: bottom_tilt(st.positions),
         "contacts": contacts,
     }
     branch = der.continuation(scene_of, 0.0, p.turns, parameter="turns", method="natural", dp=p.turns / p.sweep,
                               predictor=getattr(p, "predictor", "last"), perturb=perturb, stability=False,
+                              leave_unstable=p.perturb or None,
                               tol=solver.args.tol,
                               options=der.SolverOptions(max_iterations=MAX_ITERATIONS), summaries=summaries,
                               max_steps=8 * p.sweep, progress=False, keep_states=False, solve=solver.solve)
     steps = []
     for pt in branch.points[1:]:
-        row = {k: pt[k] for k in ("turns", "extension", "torque", "twist", "writhe", "min_distance")}
+        row = {k: pt[k] for k in ("turns", "extension", "torque", "twist", "writhe", "min_distance", "clamp_tilt")}
         row["linking_number"] = row["twist"] + row["writhe"]
         row.update(contacts=int(pt["contacts"]), converged=True, iterations=pt["newton_iterations"],
                    runtime_s=pt["step_time"])
@@ -182,6 +199,8 @@ def summarise(p, steps):
                                               "min_distance", "contacts")}
     out["converged"] = all(s["converged"] for s in steps) and len(steps) == p.sweep
     out["lk_error_max"] = float(np.max(np.abs(np.array(out["linking_number"]) - N)))
+    if all("clamp_tilt" in s for s in steps):
+        out["clamp_tilt_max"] = float(max(s["clamp_tilt"] for s in steps))
     # measured: buckling = the first step with a self-contact or with the torque below the last one
     buckled = [k for k in range(len(steps)) if steps[k]["contacts"] > 0 or (k and torque[k] < torque[k - 1] - 1e-9)]
     kb = buckled[0] if buckled else None

@@ -150,6 +150,8 @@ def test_plectonemic_step_takes_fewer_newton_iterations_with_the_exact_hessian_a
         def solve(self, scene, **kw):
             kw.setdefault("tol", 1e-4)
             r = der.solve(scene, **kw)
+            if solves and solves[-1][0] is scene:
+                solves.pop()         # a point solved again (kicked off an unstable state): its last solve counts
             solves.append((scene, r.state))
             return r
 
@@ -177,8 +179,8 @@ def test_plectonemic_steps_take_the_arc_at_every_fraction_where_it_is_proven_saf
     free of passage (its deviation from the chord falls as a^2), the straight step only where the proof fails;
     before, the first fraction whose arc was not proven safe sent the rest of the search along the straight step.
     On seven plectonemic quarter turns (L = 10, n = 100, 2.5 -> 4.25 turns, each from the continuation's own
-    state) that takes fewer Newton iterations in all (measured 210 against 254; docs/contact.md section 9.6),
-    every solve converges and the strands stay >= 2r apart."""
+    state) that takes fewer Newton iterations in all (measured 210 against 254, 172 against 232 since the clamps
+    are exact; docs/contact.md section 9.6), every solve converges and the strands stay >= 2r apart."""
     import der.solvers.implicit as implicit
 
     P = _plectoneme_module()
@@ -192,6 +194,8 @@ def test_plectonemic_steps_take_the_arc_at_every_fraction_where_it_is_proven_saf
         def solve(self, scene, **kw):
             kw.setdefault("tol", 1e-4)
             r = der.solve(scene, **kw)
+            if solves and solves[-1][0] is scene:
+                solves.pop()         # a point solved again (kicked off an unstable state): its last solve counts
             solves.append((scene, r.state))
             return r
 

@@ -221,6 +221,37 @@ def test_natural_continuation_stops_at_the_fold():
     assert 0.9 < branch.points[-1]["mt"] <= 1.1          # up to the fold of the 12-edge ring (~1.06), not past
 
 
+def test_natural_continuation_leaves_the_unstable_straight_rod_past_greenhills_threshold():
+    """Greenhill (both ends clamped, the top sliding along z and turned): on a grid through the threshold the
+    solves from the last point stay on the straight branch, unstable past it (a root finder finds saddles too);
+    with leave_unstable each such point is kicked along its lowest mode and solved again, and the branch bends
+    (stable) where the straight state turns unstable. The clamped end edges stay along z."""
+    rod = der.rod_from_shape(der.shapes.straight(1.0, 20), 1.0, 1.0, EA=1e4)
+
+    def scene_of(N):
+        c, s = np.cos(2 * np.pi * N), np.sin(2 * np.pi * N)
+        turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        return der.Scene(rod, constraints=[der.clamp("start"), der.clamp("end", rotation=turn, slide=2)])
+
+    lateral = {"lateral": lambda scene, st: float(np.hypot(*st.positions[:, :2].T).max()),
+               "tilt": lambda scene, st: float(max(np.hypot(*(st.positions[1] - st.positions[0])[:2]),
+                                                   np.hypot(*(st.positions[-1] - st.positions[-2])[:2])))}
+    Nc = 2 * 4.493409457909064 / (2 * np.pi)      # M L / A1 = 2 x 4.4934, A1 = A2 = L = 1
+    kw = dict(method="natural", parameter="N", dp=0.1 * Nc, predictor="last", summaries=lateral, tol=1e-8)
+    plain = der.continuation(scene_of, 0.0, 1.3 * Nc, **kw)
+    left = der.continuation(scene_of, 0.0, 1.3 * Nc, leave_unstable=1e-3, **kw)
+    past = [pt for pt in plain.points if pt["N"] > 1.05 * Nc]
+    assert past and all(not pt["stable"] and pt["lateral"] < 1e-6 for pt in past)     # straight and unstable
+    for pt in left.points:
+        assert pt["tilt"] < 1e-12
+        if pt["N"] > 1.05 * Nc:
+            assert pt["stable"] and pt["lateral"] > 0.05
+        elif pt["N"] < 0.95 * Nc:
+            assert pt["stable"] and pt["lateral"] < 1e-6
+    with pytest.raises(ValueError, match="leave_unstable"):
+        der.continuation(scene_of, 0.0, 1.0, leave_unstable=1e-3)        # an option of the natural method
+
+
 def test_bad_arguments_are_refused_before_any_work():
     scene_of = loop(12, 1.0)
     with pytest.raises(TypeError, match="scene_of"):

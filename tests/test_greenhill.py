@@ -34,15 +34,21 @@ def test_greenhill_with_contact_loops_then_interwinds_and_keeps_lk_in_every_tria
 
     mod = _load()
     P = mod._plectoneme()
-    p = _params(mod, sweep=30)
+    # 31 steps: no step lands on N_c itself, where the straight rod is still stable (its discrete threshold lies
+    # above N_c: lowest eigenvalue +6.4 at N_c, n = 40; on the 30-step grid step 12 is N_c, and only the clamp the
+    # old imperfection tilted made the rod leave the straight state there)
+    p = _params(mod, sweep=31)
     mod.run.validate(p)
     turns = np.linspace(0.0, p.over * mod.critical_turns(p), p.sweep + 1)[1:]
     runner = SolveRunner(p)
-    current = {"k": -1}
+    current = {"k": -1, "scene": None}
     solve = runner.solve
 
     def counting(scene, state=None, **options):
-        current["k"] += 1
+        # one scene per step (a step solved again from a kick off an unstable state uses the same scene)
+        if scene is not current["scene"]:
+            current["k"] += 1
+            current["scene"] = scene
         return solve(scene, state=state, **options)
 
     worst = {"lk": 0.0, "d": np.inf, "trials": 0}
@@ -62,6 +68,8 @@ def test_greenhill_with_contact_loops_then_interwinds_and_keeps_lk_in_every_tria
     monkeypatch.setattr(implicit, "transport", watching)
     out = mod.run(p, runner)
     assert out["converged"] and "check_failed" not in out
+    # the imperfection nudges the free nodes only: the bottom clamp stays along z (it tilted when node 1 was nudged)
+    assert out["clamp_tilt_max"] < 1e-12
     assert worst["trials"] > p.sweep and worst["lk"] < 1e-6 and worst["d"] >= 2 * p.radius
     assert np.allclose(out["linking_number"], out["turns"], atol=1e-9, rtol=0)
     Nc = out["greenhill_turns"]
@@ -79,12 +87,16 @@ def test_greenhill_with_contact_loops_then_interwinds_and_keeps_lk_in_every_tria
 
 def test_greenhill_without_contact_loses_turns_two_at_a_time():
     mod = _load()
-    p = _params(mod, sweep=30, contact=False)
+    # pulled (F = 1): without a force the rod, its clamps exact, collapses into a closed ring whose two end edges
+    # coincide, where the open rod's Lk (its closure through the ends) is not defined; pulled, it passes through
+    # itself and straightens again, and Lk is measured on the straight states
+    p = _params(mod, sweep=30, contact=False, force=1.0)
     out = mod.run(p, SolveRunner(p))
     jumps = np.array(out["linking_number"]) - np.array(out["turns"])
+    straight = np.array(out["extension"]) > 0.5 * p.L
     # each strand passage changes Lk by 2: the errors are even whole numbers, and some are not zero
-    assert np.abs(jumps).max() >= 2.0 - 1e-6
-    assert np.allclose(jumps, 2.0 * np.round(jumps / 2.0), atol=1e-6, rtol=0)
+    assert np.abs(jumps[straight]).max() >= 2.0 - 1e-6
+    assert np.allclose(jumps[straight], 2.0 * np.round(jumps[straight] / 2.0), atol=1e-6, rtol=0)
 
 
 def test_greenhill_bad_input():

@@ -291,6 +291,48 @@ def test_arc_trials_reuse_the_step_list_only_within_its_reach():
     assert seen_in_range > 0
 
 
+def test_long_step_trials_reuse_the_swept_list_only_on_the_step():
+    """A long step (beyond the Verlet margin) keeps the CCD's swept-box list for its straight trials
+    (LONG_STEP_LIST): every trial pos + a delta, a in [0, 1], gets it back without another broad phase and it holds
+    every pair within dhat there (brute force); a state off the step does not get it (fails safe). Fails with
+    LONG_STEP_LIST = False (each trial took the Verlet list, rebuilt)."""
+    from der.contact.broadphase import excluded
+    from der.solvers.options import SolverOptions
+    from der.solvers.system import build_system, prepare_state
+
+    rod, start = _line(60)
+    scene = der.Scene(rod, constraints=[der.clamp("start")], contacts=[der.self_contact(0.1)])
+    system = build_system(scene, SolverOptions())
+    term = system.terms[0]
+    pos = term.positions(prepare_state(system, start))
+    topo = term.topo
+    m = topo.edges.shape[0]
+    every = np.array([(i, j) for i in range(m) for j in range(i + 1, m)
+                      if not excluded(i, j, topo.rod_of_edge, topo.local_edge, topo.rod_n_edges, topo.rod_closed,
+                                      topo.rod_k)], dtype=np.int64)
+    rng = np.random.default_rng(3)
+    seen_in_range = 0
+    for size in (0.1, 0.3, 1.0):
+        for _ in range(3):
+            dpos = rng.normal(size=pos.shape) * size
+            listed, full = term.step_candidates(pos, dpos)
+            assert not full                       # a long step: the CCD's swept boxes
+            listed_set = {tuple(p) for p in listed}
+            phases = term.broad_phases
+            for alpha in np.linspace(0.0, 1.0, 21):
+                x = pos + alpha * dpos
+                gap = term._pair_data(x, every)[0]
+                within = {tuple(p) for p in every[gap < term.dhat]}
+                seen_in_range += len(within)
+                assert within <= listed_set, (size, alpha, within - listed_set)
+                assert term.candidates(x) is listed
+            assert term.broad_phases == phases
+            off = pos + 0.5 * dpos + 0.01 * rng.normal(size=pos.shape)        # not on the step
+            assert term.candidates(off) is not listed
+            assert term.candidates(pos + 1.5 * dpos) is not listed           # beyond its end
+    assert seen_in_range > 0
+
+
 def test_independent_ring_energy_gradient_and_writhe():
     sys.path.insert(0, os.path.join(ROOT, "tools"))
     from ring_contact_check import Ring

@@ -11,7 +11,7 @@ Run it with PYTHONPATH at two checkouts, side by side, to compare their code on 
     python tools/profile_contact_iteration.py --load DIR --steps 19 20 21 --arc-list-ab [--repeat 3]
 
 runs the same steps in one process alternating the arc trials' pair lists off (der/terms/contact.py
-ARC_STEP_LIST = False, the code before) and on, --repeat times each, and prints the least CPU time per Newton
+ARC_STEP_LIST = LONG_STEP_LIST = False, the code before) and on, --repeat times each, and prints the least CPU time per Newton
 iteration of each, the broad phases per iteration, and whether the two give bitwise the same final states.
 """
 import argparse
@@ -47,7 +47,7 @@ def main(argv=None):
     ap.add_argument("--load", required=True)
     ap.add_argument("--steps", type=int, nargs="+", default=[19, 20, 21])
     ap.add_argument("--arc-list-ab", action="store_true",
-                    help="ARC_STEP_LIST off and on alternately in this process (least CPU of --repeat each)")
+                    help="ARC_STEP_LIST and LONG_STEP_LIST off and on alternately in this process (least CPU of --repeat each)")
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args(argv)
     import der
@@ -98,7 +98,7 @@ def main(argv=None):
 
 
 def arc_list_ab(args):
-    """ARC_STEP_LIST off / on alternately on the same steps: least CPU per iteration, broad phases, bitwise check."""
+    """ARC_STEP_LIST and LONG_STEP_LIST off / on alternately on the same steps: least CPU per iteration, broad phases, bitwise check."""
     import numpy as np
 
     import der
@@ -133,14 +133,13 @@ def arc_list_ab(args):
 
     out = {}
     for flag in (False, True) * args.repeat:
-        contact_term.ARC_STEP_LIST = flag
+        contact_term.ARC_STEP_LIST = contact_term.LONG_STEP_LIST = flag
         cpu, it, phases, finals = run()
         o = out.setdefault(flag, {"cpu": [], "iterations": it, "broad_phases": phases, "finals": finals})
         o["cpu"].append(cpu)
     same = all(a[0] == b[0] and a[1] == b[1] and np.array_equal(a[2], b[2])
                for a, b in zip(out[False]["finals"], out[True]["finals"]))
-    rows = {("before (ARC_STEP_LIST = False)" if f else "before") if False else
-            ("after (ARC_STEP_LIST = True)" if f else "before (ARC_STEP_LIST = False)"):
+    rows = {("after (both True)" if f else "before (ARC_STEP_LIST = LONG_STEP_LIST = False)"):
             {"iterations": o["iterations"], "steps_iterations": [x[0] for x in o["finals"]],
              "cpu_ms_per_iteration_least": round(1e3 * min(o["cpu"]) / o["iterations"], 3),
              "cpu_s_runs": [round(c, 3) for c in o["cpu"]],

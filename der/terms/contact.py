@@ -29,6 +29,10 @@ STEP_LIST = True
 # False: every arc trial, and its passage proof, on the Verlet list or a new broad phase, as before (kept for the
 # side-by-side benchmark, tools/profile_contact_iteration.py --set ARC_STEP_LIST=0)
 ARC_STEP_LIST = True
+# a long step's swept-box pair list (the CCD's, whose boxes hold every pair within range anywhere on the straight
+# step, widened by the trials' rounding) is kept for the trials on that step and the state it accepts
+# (BoundSelfContact.candidates); False: those trials take the Verlet list, rebuilt at each trial, as before
+LONG_STEP_LIST = True
 # b''(dhat / 2) / 1 for the GAP barrier: (q + 2) q - 2 log(1/q) - 3 at q = zh / z = 2
 _B2_HALF = 8.0 + 2.0 * math.log(2.0) - 3.0
 
@@ -41,6 +45,16 @@ def sorted_pairs(pairs):
         return pairs
     key = pairs[:, 0] * (int(pairs.max()) + 1) + pairs[:, 1]
     return np.ascontiguousarray(pairs[np.argsort(key, kind="stable")])
+
+
+def on_segment(pos, x0, d, slack):
+    """True if pos lies within ``slack`` (per node, Euclidean) of x0 + s d for one s in [0, 1]: a trial of the
+    straight step x0 -> x0 + d, rounded (s fitted by least squares, then clamped)."""
+    dx = pos - x0
+    dd = float(np.vdot(d, d))
+    s = min(max(float(np.vdot(dx, d)) / dd, 0.0), 1.0) if dd > 0.0 else 0.0
+    dx -= s * d
+    return bool(float(np.einsum("ij,ij->i", dx, dx).max()) <= slack * slack)
 
 
 def positive_radius(value, name):
@@ -244,6 +258,7 @@ class BoundBarrier:
 class BoundSelfContact(BoundBarrier):
     couples_dofs = True
     _step = None              # (positions, reach per node, pairs) of the last step (step_candidates)
+    _segment = None           # (positions, step, slack, pairs) of the last long step (step_candidates)
     samples = None            # sample points per edge (der/contact/sampled.py), None: segment distances
     pair_range_extra = 0.0    # the broad phase lists edge pairs within dhat + this
 
@@ -306,6 +321,10 @@ class BoundSelfContact(BoundBarrier):
             x0, reach, pairs = self._step
             if self.C.within_reach(pos, x0, reach) and (pos1 is None or self.C.within_reach(pos1, x0, reach)):
                 return pairs
+        if pos1 is None and self._segment is not None and LONG_STEP_LIST:
+            x0, d, slack, pairs = self._segment
+            if on_segment(pos, x0, d, slack):
+                return pairs
         if self._list is not None:
             x0, pairs = self._list
             move = float(np.abs(pos - x0).max())
@@ -347,7 +366,14 @@ class BoundSelfContact(BoundBarrier):
         if wide is None:
             self.broad_phases += 1
             if ccd:
-                return sorted_pairs(C.candidate_pairs(pos, self.topo, rng, pos1=pos + dpos)), False
+                if not LONG_STEP_LIST:
+                    return sorted_pairs(C.candidate_pairs(pos, self.topo, rng, pos1=pos + dpos)), False
+                # the boxes swept over the step, widened by the trials' rounding: a pair left out keeps its gap
+                # above the range at every trial rounded onto the step (``candidates`` gives them this list)
+                slack = 1e-13 * (1.0 + float(np.abs(pos).max()))
+                pairs = sorted_pairs(C.candidate_pairs(pos, self.topo, rng + 2.0 * slack, pos1=pos + dpos))
+                self._segment = (pos.copy(), dpos.copy(), slack, pairs)
+                return pairs, False
             # a long step: boxes inflated by the reach (not kept)
             wide = sorted_pairs(C.candidate_pairs(pos, self.topo, rng, reach=reach))
         pairs = C.reach_pairs(pos, reach, self.topo.edges, wide, self.topo.edge_radius, rng)

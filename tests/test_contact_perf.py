@@ -393,3 +393,16 @@ def test_symmetric_part_of_a_band_in_place():
     S[r, c] = v
     assert np.allclose(S, 0.5 * (A + A.T), rtol=0, atol=1e-15)
     assert skew == pytest.approx(0.5 * np.abs(A - A.T).max(), rel=1e-14)
+
+
+def test_sorted_pairs_is_the_lexicographic_order():
+    """The term's pair lists are sorted (der.terms.contact.sorted_pairs, a two-pass counting sort) into exactly
+    numpy's lexicographic order, so that every list yields its active pairs in one order."""
+    from der.terms.contact import sorted_pairs
+
+    rng = np.random.default_rng(4)
+    i = rng.integers(0, 500, 5000)
+    p = np.stack([i, i + rng.integers(1, 40, i.size)], axis=1)
+    p = np.unique(p, axis=0)[rng.permutation(np.unique(p, axis=0).shape[0])]
+    assert np.array_equal(sorted_pairs(p), p[np.lexsort((p[:, 1], p[:, 0]))])
+    assert sorted_pairs(np.empty((0, 2), dtype=np.int64)).shape == (0, 2)

@@ -43,8 +43,9 @@ def sorted_pairs(pairs):
     sums -- and the Newton path -- do not depend on which list, built where, held them."""
     if pairs.shape[0] < 2:
         return pairs
-    key = pairs[:, 0] * (int(pairs.max()) + 1) + pairs[:, 1]
-    return np.ascontiguousarray(pairs[np.argsort(key, kind="stable")])
+    from ..contact.broadphase import sort_pairs
+
+    return sort_pairs(np.ascontiguousarray(pairs, dtype=np.int64), int(pairs.max()) + 1)
 
 
 def on_segment(pos, x0, d, slack):

@@ -237,6 +237,102 @@ def test_long_step_list_holds_every_pair_within_dhat_on_the_step(samples):
     assert len(term.step_candidates(pos, dpos)[0]) < len(term._list[1])
 
 
+def test_arc_trials_reuse_the_step_list_only_within_its_reach():
+    """The second-order-corrected line search's arc trials q + a' delta + a'^2 c (a' <= a) and the chords their
+    passage proof checks get the step's pair list back (BoundSelfContact.cover_arc, widened to each node's reach
+    a |delta_i| + a^2 |c_i|) without another broad phase, and that list holds every pair within dhat on them, by
+    brute force over all non-neighbour pairs -- for short arcs (from the Verlet list) and long ones (a broad
+    phase with the boxes inflated by the reach). A state beyond that reach does not get it (fails safe). Fails
+    with ARC_STEP_LIST = False (the arc states took the Verlet list or a new broad phase)."""
+    from der.contact.broadphase import excluded
+    from der.solvers.options import SolverOptions
+    from der.solvers.system import build_system, prepare_state
+
+    rod, start = _line(60)
+    scene = der.Scene(rod, constraints=[der.clamp("start")], contacts=[der.self_contact(0.1)])
+    system = build_system(scene, SolverOptions())
+    term = system.terms[0]
+    state = prepare_state(system, start)
+    pos = term.positions(state)
+    topo = term.topo
+    m = topo.edges.shape[0]
+    every = np.array([(i, j) for i in range(m) for j in range(i + 1, m)
+                      if not excluded(i, j, topo.rod_of_edge, topo.local_edge, topo.rod_n_edges, topo.rod_closed,
+                                      topo.rod_k)], dtype=np.int64)
+    rng = np.random.default_rng(2)
+    seen_in_range = 0
+    for size in (0.002, 0.01, 0.03, 0.1, 0.3):
+        for _ in range(3):
+            dpos = rng.normal(size=pos.shape) * size
+            cpos = rng.normal(size=pos.shape) * 0.5 * size
+            delta = np.zeros(term.n_dof)
+            delta.reshape(-1, 4)[:term.n_nodes, :3] = dpos
+            term._step = None
+            a = term.max_step(state, delta)
+            assert 0.0 < a <= 1.0
+            assert term.cover_arc(pos, dpos, cpos, a)
+            listed = term._step[2]
+            listed_set = {tuple(p) for p in listed}
+            phases = term.broad_phases
+            for frac in (1.0, 0.5, 0.25):
+                b = a * frac
+                for t in np.linspace(0.0, 1.0, 11):
+                    x = pos + t * b * dpos + (t * b) ** 2 * cpos
+                    gap = term._pair_data(x, every)[0]
+                    within = {tuple(p) for p in every[gap < term.dhat]}
+                    seen_in_range += len(within)
+                    assert within <= listed_set, (size, b, t, within - listed_set)
+                    assert term.candidates(x) is listed
+                assert term.candidates(pos, pos + b * dpos + b * b * cpos) is listed     # the proof's chord
+            assert term.broad_phases == phases
+            # beyond the reach: not this list
+            far = pos + 3.0 * (a * dpos + a * a * cpos) + 0.01
+            assert term.candidates(far) is not listed
+    assert seen_in_range > 0
+
+
+def test_long_step_trials_reuse_the_swept_list_only_on_the_step():
+    """A long step (beyond the Verlet margin) keeps the CCD's swept-box list for its straight trials
+    (LONG_STEP_LIST): every trial pos + a delta, a in [0, 1], gets it back without another broad phase and it holds
+    every pair within dhat there (brute force); a state off the step does not get it (fails safe). Fails with
+    LONG_STEP_LIST = False (each trial took the Verlet list, rebuilt)."""
+    from der.contact.broadphase import excluded
+    from der.solvers.options import SolverOptions
+    from der.solvers.system import build_system, prepare_state
+
+    rod, start = _line(60)
+    scene = der.Scene(rod, constraints=[der.clamp("start")], contacts=[der.self_contact(0.1)])
+    system = build_system(scene, SolverOptions())
+    term = system.terms[0]
+    pos = term.positions(prepare_state(system, start))
+    topo = term.topo
+    m = topo.edges.shape[0]
+    every = np.array([(i, j) for i in range(m) for j in range(i + 1, m)
+                      if not excluded(i, j, topo.rod_of_edge, topo.local_edge, topo.rod_n_edges, topo.rod_closed,
+                                      topo.rod_k)], dtype=np.int64)
+    rng = np.random.default_rng(3)
+    seen_in_range = 0
+    for size in (0.1, 0.3, 1.0):
+        for _ in range(3):
+            dpos = rng.normal(size=pos.shape) * size
+            listed, full = term.step_candidates(pos, dpos)
+            assert not full                       # a long step: the CCD's swept boxes
+            listed_set = {tuple(p) for p in listed}
+            phases = term.broad_phases
+            for alpha in np.linspace(0.0, 1.0, 21):
+                x = pos + alpha * dpos
+                gap = term._pair_data(x, every)[0]
+                within = {tuple(p) for p in every[gap < term.dhat]}
+                seen_in_range += len(within)
+                assert within <= listed_set, (size, alpha, within - listed_set)
+                assert term.candidates(x) is listed
+            assert term.broad_phases == phases
+            off = pos + 0.5 * dpos + 0.01 * rng.normal(size=pos.shape)        # not on the step
+            assert term.candidates(off) is not listed
+            assert term.candidates(pos + 1.5 * dpos) is not listed           # beyond its end
+    assert seen_in_range > 0
+
+
 def test_independent_ring_energy_gradient_and_writhe():
     sys.path.insert(0, os.path.join(ROOT, "tools"))
     from ring_contact_check import Ring
@@ -297,3 +393,16 @@ def test_symmetric_part_of_a_band_in_place():
     S[r, c] = v
     assert np.allclose(S, 0.5 * (A + A.T), rtol=0, atol=1e-15)
     assert skew == pytest.approx(0.5 * np.abs(A - A.T).max(), rel=1e-14)
+
+
+def test_sorted_pairs_is_the_lexicographic_order():
+    """The term's pair lists are sorted (der.terms.contact.sorted_pairs, a two-pass counting sort) into exactly
+    numpy's lexicographic order, so that every list yields its active pairs in one order."""
+    from der.terms.contact import sorted_pairs
+
+    rng = np.random.default_rng(4)
+    i = rng.integers(0, 500, 5000)
+    p = np.stack([i, i + rng.integers(1, 40, i.size)], axis=1)
+    p = np.unique(p, axis=0)[rng.permutation(np.unique(p, axis=0).shape[0])]
+    assert np.array_equal(sorted_pairs(p), p[np.lexsort((p[:, 1], p[:, 0]))])
+    assert sorted_pairs(np.empty((0, 2), dtype=np.int64)).shape == (0, 2)

@@ -2,7 +2,7 @@
 
     python tools/bench_contact_newton.py [--n 200 400 1000 3000 10000] [--iterations 6] [--repeat 3] [--json]
                                          [--state FILE] [--splu] [--samples m] [--no-memory] [--old-list]
-                                         [--no-cholesky]
+                                         [--no-cholesky] [--no-arc-list]
 
 Configuration: the plectoneme of scenarios/plectoneme.py (L = 20, A1 = 1, A2 = 1/0.67, EA = 1e5, r = 0.05,
 F = 1, clamped bottom, top turned and sliding) at 5 turns, a converged state at n = 400 (``--state``, a pickle
@@ -17,7 +17,10 @@ minus that of 2) / --iterations, the median of --repeat; memory = tracemalloc's 
 allocations; ``--no-memory``: not traced, tracemalloc slows every allocation). ``--old-list``: the contact line
 search on the Verlet list, as before the one pair list per Newton step (der/terms/contact.py STEP_LIST = False),
 for a side-by-side run; ``--no-cholesky``: the reordered band factorised by dgbsv only, as before the banded
-Cholesky (der/solvers/implicit.py CONTACT_CHOLESKY = False). The exponent is the least-squares slope of log(time) against log(n).
+Cholesky (der/solvers/implicit.py CONTACT_CHOLESKY = False); ``--no-arc-list``: the arc trials of the
+second-order-corrected line search on the Verlet list or a new broad phase, as before their step list
+and a long step's trials on the Verlet list rebuilt at each, not on the CCD's swept list (der/terms/contact.py
+ARC_STEP_LIST = LONG_STEP_LIST = False; bitwise the same iterations). The exponent is the least-squares slope of log(time) against log(n).
 """
 import argparse
 import json
@@ -133,6 +136,8 @@ def main(argv=None):
                     help="line-search trials on the Verlet list, not one pair list per Newton step (the A/B)")
     ap.add_argument("--no-cholesky", action="store_true",
                     help="the reordered contact band by dgbsv only, not the banded Cholesky (the A/B)")
+    ap.add_argument("--no-arc-list", action="store_true",
+                    help="arc trials on the Verlet list, not the step's list widened to the arc (the A/B)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     global SAMPLES, MEMORY
@@ -142,6 +147,10 @@ def main(argv=None):
         import der.terms.contact as contact_term
 
         contact_term.STEP_LIST = False
+    if args.no_arc_list:
+        import der.terms.contact as contact_term
+
+        contact_term.ARC_STEP_LIST = contact_term.LONG_STEP_LIST = False
     import der.solvers.implicit as implicit
 
     if args.splu:
@@ -181,6 +190,7 @@ def main(argv=None):
     ns = np.array([r["n"] for r in rows], float)
     fit = lambda k: float(np.polyfit(np.log(ns), np.log([r[k] for r in rows]), 1)[0]) if len(rows) > 1 else None  # noqa
     out = {"tool": "bench_contact_newton", "cpu_time": True, "splu": args.splu, "old_list": args.old_list, "cholesky": not args.no_cholesky,
+           "arc_list": not args.no_arc_list,
            "samples": args.samples, "rows": rows, "refused": refused, "exponent_time": fit("contact_s_per_iteration"),
            "exponent_time_band": fit("band_s_per_iteration"),
            "exponent_linear_solve": fit("contact_s_per_linear_solve"), "exponent_memory": fit("peak_bytes") if MEMORY else None}

@@ -207,3 +207,25 @@ def brute_force_pairs(lo, hi, rod_of_edge, local_edge, rod_n_edges, rod_closed, 
                 out[npairs, 1] = j
                 npairs += 1
     return _trimmed(out, npairs)
+
+
+@njit(cache=True)
+def sort_pairs(pairs, n_edges):
+    """The rows of pairs (m, 2), edges in [0, n_edges), in lexicographic order: a counting sort by the second
+    column, then a stable one by the first (O(m + n_edges))."""
+    m = pairs.shape[0]
+    tmp = np.empty((m, 2), dtype=np.int64)
+    out = np.empty((m, 2), dtype=np.int64)
+    for col, src, dst in ((1, pairs, tmp), (0, tmp, out)):
+        start = np.zeros(n_edges + 1, dtype=np.int64)
+        for p in range(m):
+            start[src[p, col] + 1] += 1
+        for e in range(n_edges):
+            start[e + 1] += start[e]
+        for p in range(m):
+            k = start[src[p, col]]
+            dst[k, 0] = src[p, 0]
+            dst[k, 1] = src[p, 1]
+            start[src[p, col]] = k + 1
+    return out
+

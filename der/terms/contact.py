@@ -23,8 +23,39 @@ VERLET_MARGIN = 1.0
 # one pair list per Newton step, for all its line-search trials (BoundSelfContact.step_candidates); False: the
 # Verlet list for every trial, as before (kept for the side-by-side benchmark, tools/bench_contact_newton.py)
 STEP_LIST = True
+# the pair lists of a Newton step's line search cover its arc trials too (q + a delta + a^2 c of the second-order
+# corrected search, der/solvers/implicit.py): the step's list is widened to each node's reach along the arc while
+# that fits in the Verlet margin, and a CCD over a chord within the reach uses it (BoundSelfContact.cover_arc);
+# False: every arc trial, and its passage proof, on the Verlet list or a new broad phase, as before (kept for the
+# side-by-side benchmark, tools/profile_contact_iteration.py --set ARC_STEP_LIST=0)
+ARC_STEP_LIST = True
+# a long step's swept-box pair list (the CCD's, whose boxes hold every pair within range anywhere on the straight
+# step, widened by the trials' rounding) is kept for the trials on that step and the state it accepts
+# (BoundSelfContact.candidates); False: those trials take the Verlet list, rebuilt at each trial, as before
+LONG_STEP_LIST = True
 # b''(dhat / 2) / 1 for the GAP barrier: (q + 2) q - 2 log(1/q) - 3 at q = zh / z = 2
 _B2_HALF = 8.0 + 2.0 * math.log(2.0) - 3.0
+
+
+def sorted_pairs(pairs):
+    """The rows of a pair list (n, 2) in lexicographic order: every list a term filters its active pairs from
+    (the Verlet list, a step's list, a fresh broad phase) then yields them in the same order, so the barrier's
+    sums -- and the Newton path -- do not depend on which list, built where, held them."""
+    if pairs.shape[0] < 2:
+        return pairs
+    from ..contact.broadphase import sort_pairs
+
+    return sort_pairs(np.ascontiguousarray(pairs, dtype=np.int64), int(pairs.max()) + 1)
+
+
+def on_segment(pos, x0, d, slack):
+    """True if pos lies within ``slack`` (per node, Euclidean) of x0 + s d for one s in [0, 1]: a trial of the
+    straight step x0 -> x0 + d, rounded (s fitted by least squares, then clamped)."""
+    dx = pos - x0
+    dd = float(np.vdot(d, d))
+    s = min(max(float(np.vdot(dx, d)) / dd, 0.0), 1.0) if dd > 0.0 else 0.0
+    dx -= s * d
+    return bool(float(np.einsum("ij,ij->i", dx, dx).max()) <= slack * slack)
 
 
 def positive_radius(value, name):
@@ -228,6 +259,7 @@ class BoundBarrier:
 class BoundSelfContact(BoundBarrier):
     couples_dofs = True
     _step = None              # (positions, reach per node, pairs) of the last step (step_candidates)
+    _segment = None           # (positions, step, slack, pairs) of the last long step (step_candidates)
     samples = None            # sample points per edge (der/contact/sampled.py), None: segment distances
     pair_range_extra = 0.0    # the broad phase lists edge pairs within dhat + this
 
@@ -283,10 +315,16 @@ class BoundSelfContact(BoundBarrier):
         A pair left out of a list built at x0 within dhat + margin had its boxes (inflated by r + (dhat +
         margin) / 2) apart, so a gap > dhat + margin at x0; while every node stays within margin / 2 of x0 each
         segment moves by at most margin / 2, the gap stays > dhat, and, the distance from x0 being convex along
-        a straight step, that holds on the whole step if it holds at both of its ends."""
-        if pos1 is None and self._step is not None:
+        a straight step, that holds on the whole step if it holds at both of its ends. With ``ARC_STEP_LIST`` the
+        step's list serves a straight step pos -> pos1 too when both ends lie within its reach: each node's reach
+        is a ball about x0, so every point between them does (``cover_arc``: the arc's passage proof)."""
+        if self._step is not None and (pos1 is None or ARC_STEP_LIST):
             x0, reach, pairs = self._step
-            if self.C.within_reach(pos, x0, reach):
+            if self.C.within_reach(pos, x0, reach) and (pos1 is None or self.C.within_reach(pos1, x0, reach)):
+                return pairs
+        if pos1 is None and self._segment is not None and LONG_STEP_LIST:
+            x0, d, slack, pairs = self._segment
+            if on_segment(pos, x0, d, slack):
                 return pairs
         if self._list is not None:
             x0, pairs = self._list
@@ -298,8 +336,8 @@ class BoundSelfContact(BoundBarrier):
         self.broad_phases += 1
         if pos1 is not None and np.sqrt(3.0) * float(np.abs(pos1 - pos).max()) > 0.5 * self.margin:
             # a long step: its swept boxes, not listed for reuse
-            return self.C.candidate_pairs(pos, self.topo, self.dhat + self.pair_range_extra, pos1=pos1)
-        pairs = self.C.candidate_pairs(pos, self.topo, self.dhat + self.pair_range_extra + self.margin)
+            return sorted_pairs(self.C.candidate_pairs(pos, self.topo, self.dhat + self.pair_range_extra, pos1=pos1))
+        pairs = sorted_pairs(self.C.candidate_pairs(pos, self.topo, self.dhat + self.pair_range_extra + self.margin))
         self._list = (pos.copy(), pairs)
         return pairs if pos1 is None else self.candidates(pos, pos1)
 
@@ -323,25 +361,71 @@ class BoundSelfContact(BoundBarrier):
         reach = np.empty(pos.shape[0])
         C.step_reach(dpos, 1e-13 * (1.0 + float(np.abs(pos).max())), reach)
         wide = None
-        if self._list is not None:
-            x0, pairs = self._list
-            room = 0.5 * self.margin - reach
-            if float(room.min()) >= 0.0 and C.within_reach(pos, x0, room):
-                wide = pairs
-        if wide is None and 2.0 * float(reach.max()) <= self.margin:
-            # a short step: a new Verlet list at pos holds it (and, likely, the next steps)
-            self.broad_phases += 1
-            wide = C.candidate_pairs(pos, self.topo, rng + self.margin)
-            self._list = (pos.copy(), wide)
+        if 2.0 * float(reach.max()) <= self.margin:
+            # a short step: the Verlet list, or a new one at pos, holds it (and, likely, the next steps)
+            wide = self._verlet_within(pos, reach)
         if wide is None:
             self.broad_phases += 1
             if ccd:
-                return C.candidate_pairs(pos, self.topo, rng, pos1=pos + dpos), False
+                if not LONG_STEP_LIST:
+                    return sorted_pairs(C.candidate_pairs(pos, self.topo, rng, pos1=pos + dpos)), False
+                # the boxes swept over the step, widened by the trials' rounding: a pair left out keeps its gap
+                # above the range at every trial rounded onto the step (``candidates`` gives them this list)
+                slack = 1e-13 * (1.0 + float(np.abs(pos).max()))
+                pairs = sorted_pairs(C.candidate_pairs(pos, self.topo, rng + 2.0 * slack, pos1=pos + dpos))
+                self._segment = (pos.copy(), dpos.copy(), slack, pairs)
+                return pairs, False
             # a long step: boxes inflated by the reach (not kept)
-            wide = C.candidate_pairs(pos, self.topo, rng, reach=reach)
+            wide = sorted_pairs(C.candidate_pairs(pos, self.topo, rng, reach=reach))
         pairs = C.reach_pairs(pos, reach, self.topo.edges, wide, self.topo.edge_radius, rng)
         self._step = (pos.copy(), reach, pairs)
         return pairs, True
+
+    def cover_arc(self, pos, dd, cc, a):
+        """Widen the step's pair list (``step_candidates``, built at pos) to the arc trials q + a' delta + a'^2 c
+        for every a' <= a, and to the chords their passage proof runs the CCD on: node i then moves by at most
+        a |delta_i| + a^2 |c_i| (componentwise), so that reach (joined to the straight step's, or to a |delta_i|
+        where this step has no list) bounds every such state. The list is filtered by ``reach_pairs`` from the
+        Verlet list while the reach fits in its margin, else from one broad phase with the boxes inflated by the
+        reach. Before (ARC_STEP_LIST = False) each arc trial, its passage proof and the next Newton step's first
+        evaluation each took the Verlet list or a new broad phase. Returns True if the step's list covers the arc."""
+        if not ARC_STEP_LIST:
+            return False
+        slack = 1e-13 * (1.0 + float(np.abs(pos).max()))
+        arc_reach = np.empty(pos.shape[0])
+        self.C.step_reach(np.ascontiguousarray(a * np.abs(dd) + (a * a) * np.abs(cc)), slack, arc_reach)
+        if self._step is None or self._step[0].shape != pos.shape or not np.array_equal(self._step[0], pos):
+            # no list for this step (a long step whose CCD-safe part exceeds the margin): one for the arc alone
+            # (which bounds the straight trials at a' <= a as well)
+            x0, wide_reach = pos.copy(), arc_reach
+        else:
+            x0, reach, _ = self._step
+            if bool(np.all(arc_reach <= reach)):
+                return True
+            wide_reach = np.maximum(reach, arc_reach)
+        if 2.0 * float(wide_reach.max()) <= self.margin:
+            wide = self._verlet_within(pos, wide_reach)
+        else:
+            # beyond the margin: one broad phase with each box inflated by its nodes' reach, for this arc's trials
+            self.broad_phases += 1
+            wide = sorted_pairs(self.C.candidate_pairs(pos, self.topo, self.dhat + self.pair_range_extra,
+                                                       reach=wide_reach))
+        self._step = (x0, wide_reach, self.C.reach_pairs(pos, wide_reach, self.topo.edges, wide,
+                                                          self.topo.edge_radius, self.dhat + self.pair_range_extra))
+        return True
+
+    def _verlet_within(self, pos, reach):
+        """The Verlet list if it holds every pair that can come within range (dhat + extra) on states whose node
+        i stays within reach[i] of pos, else a new Verlet list at pos (2 max reach <= margin required)."""
+        if self._list is not None:
+            x0, pairs = self._list
+            room = 0.5 * self.margin - reach
+            if float(room.min()) >= 0.0 and self.C.within_reach(pos, x0, room):
+                return pairs
+        self.broad_phases += 1
+        wide = sorted_pairs(self.C.candidate_pairs(pos, self.topo, self.dhat + self.pair_range_extra + self.margin))
+        self._list = (pos.copy(), wide)
+        return wide
 
     def check_start(self, state, tight_bend="refuse"):
         curvature_radius_check(self.rod, state, self.radius, "der.self_contact", tight_bend)
@@ -473,6 +557,7 @@ class BoundSelfContact(BoundBarrier):
             + 1e-13 * (1.0 + float(np.abs(pos).max()))
         if not (np.isfinite(dev) and np.isfinite(chord).all()) or dev > 0.25 * self.dhat:
             return False
+        self.cover_arc(pos, dd, cc, a)
         pairs = self.candidates(pos, pos + chord)
         tau, _, _ = self.C.pairs_ccd(pos, chord, self.topo.edges, pairs, self.topo.edge_radius + dev, MIN_GAP_FRACTION,
                                      1e-6, 10000)

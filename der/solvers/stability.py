@@ -1324,7 +1324,10 @@ def _banded_lowest(system, K, idx, mass, m, V, k, symmetric, scale):
             return root * op(lift)[massive]
 
         C = spla.LinearOperator((n_m, n_m), matvec=c_mat, dtype=float)
-        mu, y = spla.eigsh(C, k=kk, which="LM", ncv=min(n_m - 1, ncv))
+        # ARPACK's start is random unless given: seeded, so that a run's modes (a degenerate pair's basis, the
+        # kick of der.continuation.leave_unstable) are the same every run
+        mu, y = spla.eigsh(C, k=kk, which="LM", ncv=min(n_m - 1, ncv),
+                           v0=np.random.default_rng(0).standard_normal(n_m))
         keep = mu != 0.0
         mu, y = mu[keep], y[:, keep]
         lifted = np.zeros((n, y.shape[1]))
@@ -1332,9 +1335,11 @@ def _banded_lowest(system, K, idx, mass, m, V, k, symmetric, scale):
         vec = op(lifted) / mu[None, :]
         ev = sigma + 1.0 / mu
     elif symmetric:
-        ev, vec = spla.eigsh(A, k=kk, M=Mdiag, sigma=sigma, which="LM", OPinv=OPinv, ncv=ncv)
+        ev, vec = spla.eigsh(A, k=kk, M=Mdiag, sigma=sigma, which="LM", OPinv=OPinv, ncv=ncv,
+                             v0=np.random.default_rng(0).standard_normal(n))
     else:
-        ev, vec = spla.eigs(A, k=kk, M=Mdiag, sigma=sigma, which="LM", OPinv=OPinv, ncv=ncv)
+        ev, vec = spla.eigs(A, k=kk, M=Mdiag, sigma=sigma, which="LM", OPinv=OPinv, ncv=ncv,
+                            v0=np.random.default_rng(0).standard_normal(n))
     return ev, vec, n_below, sigma
 
 

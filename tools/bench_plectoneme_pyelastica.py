@@ -222,6 +222,10 @@ def der_run(sweep, tol, force=0.0, max_iterations=5000):
     xi = rod.rest_q.reshape(-1, 4)[:, 2] / L
     bump = np.zeros((rod.n_nodes, 3))
     bump[:, 0] = 1e-3 * L * np.sin(np.pi * np.clip(xi, 0, 1))
+    # not on the nodes the clamps hold (each clamp holds its end edge where the start state has it: a nudged node 1
+    # tilted the bottom clamp, as in scenarios/plectoneme.py before stop 27)
+    bump[:2] = 0.0
+    bump[-2:] = 0.0
 
     def scene_of(N):
         loads = [der.end_force([0.0, 0.0, force])] if force else []
@@ -255,7 +259,7 @@ def der_run(sweep, tol, force=0.0, max_iterations=5000):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", der.TightBendWarning)
         branch = der.continuation(scene_of, 0.0, float(TURNS), parameter="turns", method="natural",
-                                  dp=TURNS / sweep, predictor="last", perturb=perturb, stability=False,
+                                  dp=TURNS / sweep, predictor="last", perturb=perturb, stability=False, leave_unstable=1e-3,
                                   tol=tol, options=options, summaries={"contacts": contacts, "twist": twist, "writhe": writhe,
                                                                   "extension": extension,
                                                                   "min_curvature_radius": bend_radius},
